@@ -1,0 +1,44 @@
+"""kronlag: equations of motion of constrained multibody systems in the
+Kronecker-product matrix form of Lagrange's equations with multipliers
+(Van Khang, Mech. Res. Commun. 38 (2011) 294-299)::
+
+    M(q) qdd + C(q, qd) qd + Phi_q^T lambda + A^T mu + g(q) = f_Q
+    f(q) = 0,   A(q) qd + b(q) = 0
+"""
+
+from . import calculus, models
+from .derivation import derive
+from .equations import Equations
+from .system import (
+    Damper,
+    ModelError,
+    PlanarBody,
+    PointMass,
+    RigidBody,
+    Spring,
+    System,
+    acceleration_symbol,
+    coordinates,
+    speed_symbol,
+    t,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "calculus",
+    "models",
+    "derive",
+    "Equations",
+    "System",
+    "PlanarBody",
+    "RigidBody",
+    "PointMass",
+    "Spring",
+    "Damper",
+    "ModelError",
+    "coordinates",
+    "speed_symbol",
+    "acceleration_symbol",
+    "t",
+]

@@ -1,0 +1,296 @@
+"""Symbolic derivation of the equations of motion (Van Khang 2011, Section 3).
+
+The mass matrix is assembled from the body Jacobians (Eq. 12)::
+
+    M = sum_i (m_i J_Ti^T J_Ti + J_Ri^T I_i J_Ri)
+
+and the Coriolis matrix of Eq. 22::
+
+    C = dM/dq (I ⊗ qd) - 1/2 (dM/dq (qd ⊗ I))^T
+
+is computed without forming ``dM/dq`` or any Kronecker product.  Write every
+body term of ``M`` as ``J^T W J`` (``W = m_i I`` or ``I_i``).  Theorem 1 gives
+``Md = X + X^T`` with ``X = J^T W Jd`` and ``Jd = sum_k dJ/dq_k qd_k``, and
+Theorem 2 gives the second term row by row::
+
+    T2[i, :] = (sum_j dM_:j/dq_i qd_j)^T = (W v)^T dJ/dq_i + (W dJ/dq_i qd)^T J,   v = J qd
+
+so that ``C = Md - T2 / 2`` and the Christoffel form is
+``C_christoffel = (Md + T2^T - T2) / 2``.  All heavy algebra runs in SymEngine
+on plain symbols; the results are converted to SymPy once at the end.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Callable
+
+import symengine as se
+import sympy as sp
+
+from .equations import Equations
+from .system import PlanarBody, PointMass, RigidBody, System, t
+
+__all__ = ["derive"]
+
+
+def _se_matrix(matrix: sp.MatrixBase) -> se.DenseMatrix:
+    return se.DenseMatrix(matrix.rows, matrix.cols, [se.sympify(entry) for entry in matrix])
+
+
+class _SympyConverter:
+    """SymEngine -> SymPy, memoized so that a subexpression shared by many
+    entries (a sum of masses, a body velocity) is converted once."""
+
+    def __init__(self):
+        self.memo: dict = {}
+
+    def __call__(self, expr):
+        result = self.memo.get(expr)
+        if result is None:
+            result = self._build(expr)
+            self.memo[expr] = result
+        return result
+
+    def _build(self, expr):
+        if not expr.args:
+            return expr._sympy_()
+        args = [self(arg) for arg in expr.args]
+        if isinstance(expr, se.Add):
+            return sp.Add(*args)
+        if isinstance(expr, se.Mul):
+            return sp.Mul(*args)
+        if isinstance(expr, se.Pow):
+            return sp.Pow(*args)
+        function = getattr(sp, type(expr).__name__, None)
+        if function is None:  # an undefined function f(q): let SymEngine convert it
+            return expr._sympy_()
+        return function(*args)
+
+    def matrix(self, matrix: se.DenseMatrix) -> sp.ImmutableMatrix:
+        return sp.ImmutableMatrix(matrix.rows, matrix.cols, [self(entry) for entry in matrix])
+
+
+def _jacobian(vector: se.DenseMatrix, variables: list) -> se.DenseMatrix:
+    return se.DenseMatrix(vector.rows, len(variables),
+                          [se.diff(vector[i], x) for i in range(vector.rows) for x in variables])
+
+
+def _vee(skew: se.DenseMatrix) -> list:
+    """Axial vector of a skew-symmetric 3x3 matrix."""
+    return [skew[2, 1], skew[0, 2], skew[1, 0]]
+
+
+def _rotation_jacobian(body: RigidBody, q: list) -> se.DenseMatrix:
+    """``J_R`` with ``omega_body = J_R qd``: column k is ``vee(R^T dR/dq_k)`` (Theorem 1)."""
+    rotation = _se_matrix(body.rotation)
+    rotation_t = rotation.T
+    columns = [_vee(rotation_t * rotation.diff(qk)) for qk in q]
+    jacobian = se.DenseMatrix(3, len(q), [columns[k][i] for i in range(3) for k in range(len(q))])
+    if body.simplify:
+        jacobian = _se_matrix(sp.Matrix(3, len(q), [sp.trigsimp(sp.sympify(e)) for e in jacobian]))
+    return jacobian
+
+
+def _weigh(weight, matrix: se.DenseMatrix) -> se.DenseMatrix:
+    """``W matrix`` for a square matrix weight ``W``; a scalar weight is kept apart (see _Accumulator)."""
+    return weight * matrix if isinstance(weight, se.DenseMatrix) else matrix
+
+
+class _Accumulator:
+    """Sums the body terms ``J^T W J`` of M together with ``Md`` and ``T2``.
+
+    A scalar weight (a mass or a planar inertia) is kept apart from the term it
+    multiplies, and terms that coincide are merged at the end: in a serial
+    chain many bodies share a Jacobian column, and ``(m_3 + m_4 + m_5) c`` is
+    far smaller than ``m_3 c + m_4 c + m_5 c``.  Each entry is summed once, at
+    the end: adding to a growing symbolic sum body by body would copy it.
+    """
+
+    def __init__(self, q: list, qd: list):
+        self.q, self.qd = q, qd
+        self.mass_terms: dict[tuple[int, int], list] = defaultdict(list)
+        self.mass_rate_terms: dict[tuple[int, int], list] = defaultdict(list)
+        self.second_terms: dict[tuple[int, int], list] = defaultdict(list)
+
+    def add(self, jacobian: se.DenseMatrix, weight) -> None:
+        """Add ``J^T W J``; ``weight`` is a scalar or a symmetric square matrix ``W``."""
+        rows = range(jacobian.rows)
+        support = [k for k in range(jacobian.cols) if any(not jacobian[r, k].is_zero for r in rows)]
+        if not support:
+            return
+        factor = se.Integer(1) if isinstance(weight, se.DenseMatrix) else weight
+        jacobian = se.DenseMatrix(jacobian.rows, len(support), [jacobian[r, k] for r in rows for k in support])
+        qd = se.DenseMatrix(len(support), 1, [self.qd[k] for k in support])
+        weighted = _weigh(weight, jacobian)  # W J, so J^T W = weighted^T
+        _scatter(self.mass_terms, factor, support, support, weighted.T * jacobian)
+        symbols = set().union(*(entry.free_symbols for entry in jacobian))
+        derivatives = {k: jacobian.diff(qk) for k, qk in enumerate(self.q) if qk in symbols}
+        if not derivatives:
+            return
+        jacobian_dot = se.zeros(jacobian.rows, len(support))
+        for k, derivative in derivatives.items():
+            jacobian_dot += derivative * self.qd[k]
+        cross = weighted.T * jacobian_dot  # X = J^T W Jd, Md = X + X^T
+        _scatter(self.mass_rate_terms, factor, support, support, cross)
+        _scatter(self.mass_rate_terms, factor, support, support, cross.T)
+        weighted_velocity = (weighted * qd).T  # (W v)^T
+        for i, derivative in derivatives.items():
+            _scatter(self.second_terms, factor, [i], support, weighted_velocity * derivative)
+            _scatter(self.second_terms, factor, [i], support, _weigh(weight, derivative * qd).T * jacobian)
+
+    def _sum(self, terms: dict) -> se.DenseMatrix:
+        m = len(self.q)
+        return se.DenseMatrix(m, m, [_merge(terms[(i, j)]) if (i, j) in terms else 0
+                                     for i in range(m) for j in range(m)])
+
+    def matrices(self) -> tuple[se.DenseMatrix, se.DenseMatrix, se.DenseMatrix]:
+        """``(M, Md, T2)``."""
+        return self._sum(self.mass_terms), self._sum(self.mass_rate_terms), self._sum(self.second_terms)
+
+
+def _scatter(terms: dict, factor, rows: list, cols: list, block: se.DenseMatrix) -> None:
+    """Append ``(factor, entry)`` for the nonzero entries of ``block`` to ``terms[(rows[a], cols[b])]``."""
+    entries = iter(block)
+    for i in rows:
+        for j in cols:
+            entry = next(entries)
+            if not entry.is_zero:
+                terms[(i, j)].append((factor, entry))
+
+
+def _merge(pairs: list) -> se.Basic:
+    """``sum factor * term`` with the factors of equal terms added first."""
+    factors: dict = defaultdict(list)
+    for factor, term in pairs:
+        factors[term].append(factor)
+    return se.Add(*[se.Add(*group) * term for term, group in factors.items()])
+
+
+def _simplifier(simplify) -> Callable[[sp.Expr], sp.Expr] | None:
+    if simplify is False or simplify is None:
+        return None
+    if simplify is True or simplify == "trigsimp":
+        return sp.trigsimp
+    if simplify == "simplify":
+        return sp.simplify
+    if callable(simplify):
+        return simplify
+    raise ValueError(f"simplify must be False, True, 'trigsimp', 'simplify' or a callable, got {simplify!r}")
+
+
+def derive(system: System, *, simplify: bool | str | Callable = False) -> Equations:
+    """Derive the equations of motion of ``system`` in the Kronecker matrix form.
+
+    Returns the matrices of (Van Khang 2011, Eq. 23)::
+
+        M(q) qdd + C(q, qd) qd + Phi_q^T lambda + A^T mu + g(q) = f_Q
+        f(q) = 0,   A(q) qd + b(q) = 0
+
+    Parameters
+    ----------
+    system : System
+    simplify : bool, {'trigsimp', 'simplify'} or callable, optional
+        Simplify every entry of the results (``True`` means ``trigsimp``).
+        Off by default: simplification can cost far more than the derivation.
+
+    Returns
+    -------
+    Equations
+        ``M`` (m x m), ``C`` and ``C_christoffel`` (m x m), ``g`` (m x 1),
+        ``Phi`` (r x 1), ``Phi_q`` (r x m), ``A`` (s x m), ``b`` (s x 1),
+        ``f_Q`` (m x 1), and ``dM_dq`` (m x m², on first access).
+    """
+    if not isinstance(system, System):
+        raise TypeError(f"derive takes a kronlag.System, got {type(system).__name__}")
+    q = [se.Symbol(s.name) for s in system.coordinates]
+    qd = [se.Symbol(s.name) for s in system.speeds]
+    m = len(q)
+    accumulator = _Accumulator(q, qd)
+    potential = se.Integer(0)
+    gravity = _se_matrix(system.gravity) if system.gravity is not None else None
+    generalized_force = se.zeros(m, 1)
+    rotation_jacobians = {}
+
+    for body in system.bodies:
+        position = _se_matrix(body.position)
+        mass = se.sympify(body.mass)
+        accumulator.add(_jacobian(position, q), mass)
+        if isinstance(body, PlanarBody):
+            angle_jacobian = _jacobian(se.DenseMatrix(1, 1, [se.sympify(body.angle)]), q)
+            accumulator.add(angle_jacobian, se.sympify(body.inertia))
+            rotation_jacobians[body.name] = angle_jacobian
+        elif isinstance(body, RigidBody):
+            rotation_jacobian = _rotation_jacobian(body, q)
+            accumulator.add(rotation_jacobian, _se_matrix(body.inertia))
+            rotation_jacobians[body.name] = rotation_jacobian
+        else:
+            assert isinstance(body, PointMass)
+        if gravity is not None:
+            potential -= mass * (gravity.T * position)[0, 0]
+
+    for spring in system.springs:
+        potential += se.sympify(spring.potential())
+    for term in system.potentials:
+        potential += se.sympify(term.expression)
+    g = se.DenseMatrix(m, 1, [se.diff(potential, qk) for qk in q])
+
+    qd_vector = se.DenseMatrix(m, 1, qd)
+    for damper in system.dampers:
+        separation = _se_matrix(damper.point_a - damper.point_b)
+        gradient = separation.T * _jacobian(separation, q)  # d^T dd/dq = L dL/dq
+        rate = (gradient * qd_vector)[0, 0]
+        squared = (separation.T * separation)[0, 0]
+        generalized_force -= gradient.T * (se.sympify(damper.coefficient) * rate / squared)
+    for force in system.forces:
+        value = _se_matrix(force.value)
+        if force.kind == "generalized":
+            generalized_force += value
+        elif force.kind == "point":
+            generalized_force += _jacobian(_se_matrix(force.where), q).T * value
+        else:
+            body = system.body(force.where)
+            if isinstance(body, RigidBody) and force.frame == "world":
+                value = _se_matrix(body.rotation).T * value
+            generalized_force += rotation_jacobians[body.name].T * value
+
+    constraints = se.DenseMatrix(len(system.constraints), 1,
+                                 [se.sympify(c.expression) for c in system.constraints])
+    constraint_jacobian = _jacobian(constraints, q)
+    velocity_constraints = [se.sympify(c.expression) for c in system.nonholonomic_constraints]
+    nonholonomic_matrix = se.DenseMatrix(len(velocity_constraints), m,
+                                         [se.diff(h, v) for h in velocity_constraints for v in qd])
+    zero_speeds = {v: 0 for v in qd}
+    nonholonomic_offset = se.DenseMatrix(len(velocity_constraints), 1,
+                                         [h.subs(zero_speeds) for h in velocity_constraints])
+
+    mass, mass_rate, second = accumulator.matrices()
+    coriolis = mass_rate - second / 2
+
+    simplifier = _simplifier(simplify)
+    converter = _SympyConverter()
+
+    def public(matrix: se.DenseMatrix) -> sp.ImmutableMatrix:
+        converted = converter.matrix(matrix)
+        return converted.applyfunc(simplifier) if simplifier else converted
+
+    def christoffel() -> sp.ImmutableMatrix:
+        # Converted on first access: the Christoffel form is as large as C and
+        # most uses (simulation) never need it.
+        return public((mass_rate + second.T - second) / 2)
+
+    potential_expr = converter(potential)
+    return Equations(
+        system=system,
+        M=public(mass),
+        C=public(coriolis),
+        christoffel_source=christoffel,
+        g=public(g),
+        Phi=public(constraints),
+        Phi_q=public(constraint_jacobian),
+        A=public(nonholonomic_matrix),
+        b=public(nonholonomic_offset),
+        f_Q=public(generalized_force),
+        potential_energy=simplifier(potential_expr) if simplifier else potential_expr,
+        time=t,
+    )

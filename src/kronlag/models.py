@@ -1,0 +1,208 @@
+"""Canonical models: one place that feeds tests, docs, examples and the CLI.
+
+Every function returns a fresh :class:`kronlag.System` whose symbols carry the
+names given in its docstring, so scripts can rely on them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import sympy as sp
+
+from .system import PlanarBody, PointMass, RigidBody, System, coordinates
+
+__all__ = [
+    "four_bar",
+    "quick_return",
+    "closed_chain",
+    "double_pendulum",
+    "slider_crank",
+    "heavy_top",
+    "chaplygin_sleigh",
+    "BUILTIN_MODELS",
+]
+
+cos, sin = sp.cos, sp.sin
+
+
+def _bar(name: str, mass, inertia, start, length, angle) -> PlanarBody:
+    """A uniform bar from ``start`` along ``angle``; centre of mass at its middle."""
+    centre = (start[0] + length / 2 * cos(angle), start[1] + length / 2 * sin(angle))
+    return PlanarBody(name, mass=mass, inertia=inertia, position=centre, angle=angle)
+
+
+def four_bar() -> System:
+    """Planar four-bar mechanism of Van Khang (2011), Section 4.1.
+
+    Coordinates ``q1, q2, q3``: angles of crank AB (``l1``), coupler BC (``l2``)
+    and follower DC (``l3``) from the x-axis; ground pivots A = (0, 0) and
+    D = (``l4``, 0).  Uniform links (``m1..m3``, central inertias ``I1..I3``),
+    gravity ``g`` along -y, torque ``tau`` on the crank.  Loop closure (Eq. 24)::
+
+        f1 = l1 cos q1 + l2 cos q2 - l3 cos q3 - l4 = 0
+        f2 = l1 sin q1 + l2 sin q2 - l3 sin q3 = 0
+    """
+    q1, q2, q3 = coordinates("q1 q2 q3")
+    l1, l2, l3, l4, m1, m2, m3, I1, I2, I3, g, tau = sp.symbols("l1 l2 l3 l4 m1 m2 m3 I1 I2 I3 g tau")
+    system = System([q1, q2, q3], parameters=[l1, l2, l3, l4, m1, m2, m3, I1, I2, I3, g, tau],
+                    gravity=(0, -g), name="four_bar")
+    system.add_body(_bar("crank", m1, I1, (0, 0), l1, q1))
+    system.add_body(_bar("coupler", m2, I2, (l1 * cos(q1), l1 * sin(q1)), l2, q2))
+    system.add_body(_bar("follower", m3, I3, (l4, 0), l3, q3))
+    system.add_constraint(l1 * cos(q1) + l2 * cos(q2) - l3 * cos(q3) - l4, name="loop x")
+    system.add_constraint(l1 * sin(q1) + l2 * sin(q2) - l3 * sin(q3), name="loop y")
+    system.add_torque("crank", tau, name="drive")
+    return system
+
+
+def quick_return() -> System:
+    """Quick-return mechanism of Van Khang (2011), Section 4.2.
+
+    Coordinates ``phi1, phi2, phi3``: crank BC (pivot B = (0, ``l_AB``), length
+    ``l_BC``), rocker AE (pivot A = (0, 0), length ``l_AE``) and link EF
+    (``l_EF``).  Uniform bars (``m1..m3``, ``I1..I3``); slider D is a point mass
+    ``m4`` at the crank pin C; slider G is a point mass ``m5`` on the guide
+    ``y = l_AH`` (Eq. 36 fixes its height, so its weight does not enter the
+    equations).  Torque ``tau`` on the crank, gravity ``g`` along -y.
+    Constraints (Eq. 37)::
+
+        f1 = l_AH - l_AE sin phi2 - l_EF sin phi3 = 0    (F on the guide)
+        f2 = l_AB cos phi2 - l_BC sin(phi2 - phi1) = 0   (D on the line AE)
+    """
+    phi1, phi2, phi3 = coordinates("phi1 phi2 phi3")
+    l_BC, l_AB, l_AE, l_EF, l_AH = sp.symbols("l_BC l_AB l_AE l_EF l_AH")
+    m1, m2, m3, m4, m5, I1, I2, I3, g, tau = sp.symbols("m1 m2 m3 m4 m5 I1 I2 I3 g tau")
+    system = System([phi1, phi2, phi3],
+                    parameters=[l_BC, l_AB, l_AE, l_EF, l_AH, m1, m2, m3, m4, m5, I1, I2, I3, g, tau],
+                    gravity=(0, -g), name="quick_return")
+    system.add_body(_bar("crank", m1, I1, (0, l_AB), l_BC, phi1))
+    system.add_body(_bar("rocker", m2, I2, (0, 0), l_AE, phi2))
+    system.add_body(_bar("link", m3, I3, (l_AE * cos(phi2), l_AE * sin(phi2)), l_EF, phi3))
+    system.add_body(PointMass("slider D", mass=m4, position=(l_BC * cos(phi1), l_AB + l_BC * sin(phi1))))
+    system.add_body(PointMass("slider G", mass=m5, position=(l_AE * cos(phi2) + l_EF * cos(phi3), l_AH)))
+    system.add_constraint(l_AH - l_AE * sin(phi2) - l_EF * sin(phi3), name="F on guide")
+    system.add_constraint(l_AB * cos(phi2) - l_BC * sin(phi2 - phi1), name="D on AE")
+    system.add_torque("crank", tau, name="drive")
+    return system
+
+
+def closed_chain(n: int, angles: str = "absolute") -> System:
+    """Closed planar chain of ``n`` uniform links (a four-bar for ``n = 3``).
+
+    Links have lengths ``l1..ln``, masses ``m1..mn`` and central inertias
+    ``I1..In``; the first is pinned at the origin, the tip of the last at the
+    ground point (``xg``, ``yg``); gravity ``g`` along -y.  Coordinates
+    ``q1..qn`` are the links' absolute angles (``angles="absolute"``) or the
+    joint angles relative to the previous link (``angles="relative"``).
+    """
+    if not isinstance(n, int) or n < 2:
+        raise ValueError(f"closed_chain needs an integer n >= 2 links, got {n!r}")
+    if angles not in ("absolute", "relative"):
+        raise ValueError(f"angles must be 'absolute' or 'relative', got {angles!r}")
+    q = coordinates(" ".join(f"q{i}" for i in range(1, n + 1)))
+    lengths = sp.symbols(f"l1:{n + 1}")
+    masses = sp.symbols(f"m1:{n + 1}")
+    inertias = sp.symbols(f"I1:{n + 1}")
+    xg, yg, g = sp.symbols("xg yg g")
+    system = System(q, parameters=[*lengths, *masses, *inertias, xg, yg, g], gravity=(0, -g),
+                    name=f"closed_chain_{n}_{angles}")
+    joint = (sp.Integer(0), sp.Integer(0))
+    angle = sp.Integer(0)
+    for i in range(n):
+        angle = q[i] if angles == "absolute" else angle + q[i]
+        system.add_body(_bar(f"link {i + 1}", masses[i], inertias[i], joint, lengths[i], angle))
+        joint = (joint[0] + lengths[i] * cos(angle), joint[1] + lengths[i] * sin(angle))
+    system.add_constraint(joint[0] - xg, name="tip x")
+    system.add_constraint(joint[1] - yg, name="tip y")
+    return system
+
+
+def double_pendulum() -> System:
+    """Double pendulum of two uniform rods, hanging from the origin.
+
+    Coordinates ``q1, q2``: absolute angles of the rods from the downward
+    vertical; lengths ``l1, l2``, masses ``m1, m2``, central inertias
+    ``I1, I2``, gravity ``g`` along -y.  No constraints (m = n = 2).
+    """
+    q1, q2 = coordinates("q1 q2")
+    l1, l2, m1, m2, I1, I2, g = sp.symbols("l1 l2 m1 m2 I1 I2 g")
+    system = System([q1, q2], parameters=[l1, l2, m1, m2, I1, I2, g], gravity=(0, -g), name="double_pendulum")
+    # Angle from the downward vertical = angle from the x-axis + pi/2.
+    system.add_body(_bar("rod 1", m1, I1, (0, 0), l1, q1 - sp.pi / 2))
+    system.add_body(_bar("rod 2", m2, I2, (l1 * sin(q1), -l1 * cos(q1)), l2, q2 - sp.pi / 2))
+    return system
+
+
+def slider_crank() -> System:
+    """Slider-crank: crank ``l1`` at the origin, connecting rod ``l2``, slider on the x-axis.
+
+    Coordinates ``q1`` (crank angle), ``q2`` (rod angle), ``x`` (slider
+    position); uniform crank and rod (``m1, m2``, ``I1, I2``), slider point
+    mass ``m3``; torque ``tau`` on the crank, gravity ``g`` along -y.
+    """
+    q1, q2, x = coordinates("q1 q2 x")
+    l1, l2, m1, m2, m3, I1, I2, g, tau = sp.symbols("l1 l2 m1 m2 m3 I1 I2 g tau")
+    system = System([q1, q2, x], parameters=[l1, l2, m1, m2, m3, I1, I2, g, tau], gravity=(0, -g),
+                    name="slider_crank")
+    system.add_body(_bar("crank", m1, I1, (0, 0), l1, q1))
+    system.add_body(_bar("rod", m2, I2, (l1 * cos(q1), l1 * sin(q1)), l2, q2))
+    system.add_body(PointMass("slider", mass=m3, position=(x, 0)))
+    system.add_constraint(l1 * cos(q1) + l2 * cos(q2) - x, name="pin x")
+    system.add_constraint(l1 * sin(q1) + l2 * sin(q2), name="pin y")
+    system.add_torque("crank", tau, name="drive")
+    return system
+
+
+def _rotation_z(angle) -> sp.Matrix:
+    return sp.Matrix([[cos(angle), -sin(angle), 0], [sin(angle), cos(angle), 0], [0, 0, 1]])
+
+
+def _rotation_x(angle) -> sp.Matrix:
+    return sp.Matrix([[1, 0, 0], [0, cos(angle), -sin(angle)], [0, sin(angle), cos(angle)]])
+
+
+def heavy_top() -> System:
+    """Heavy symmetric top spinning about a fixed point at the origin.
+
+    Coordinates: z-x-z Euler angles ``psi`` (precession), ``theta``
+    (nutation), ``phi`` (spin), ``R = Rz(psi) Rx(theta) Rz(phi)``.  Mass ``m``,
+    centre of mass at distance ``l`` along the body z-axis, central inertia
+    ``diag(Ixx, Ixx, Izz)``, gravity ``g`` along -z.
+    """
+    psi, theta, phi = coordinates("psi theta phi")
+    m, l, g, Ixx, Izz = sp.symbols("m l g Ixx Izz")
+    system = System([psi, theta, phi], parameters=[m, l, g, Ixx, Izz], gravity=(0, 0, -g), name="heavy_top")
+    rotation = _rotation_z(psi) * _rotation_x(theta) * _rotation_z(phi)
+    system.add_body(RigidBody("top", mass=m, inertia=sp.diag(Ixx, Ixx, Izz),
+                              position=rotation * sp.Matrix([0, 0, l]), rotation=rotation))
+    return system
+
+
+def chaplygin_sleigh() -> System:
+    """Chaplygin sleigh: a planar body on a knife edge (nonholonomic).
+
+    Coordinates ``x, y`` (centre of mass) and ``theta`` (heading); mass ``m``,
+    central inertia ``I``; the blade sits at distance ``a`` behind the centre
+    of mass and cannot slide sideways::
+
+        -sin(theta) xd + cos(theta) yd - a thetad = 0
+    """
+    x, y, theta = coordinates("x y theta")
+    m, inertia, a = sp.symbols("m I a")
+    system = System([x, y, theta], parameters=[m, inertia, a], name="chaplygin_sleigh")
+    system.add_body(PlanarBody("sleigh", mass=m, inertia=inertia, position=(x, y), angle=theta))
+    xd, yd, thetad = system.speeds
+    system.add_nonholonomic_constraint(-sin(theta) * xd + cos(theta) * yd - a * thetad, name="blade")
+    return system
+
+
+#: Built-in models by name (the CLI and model files use these names).
+BUILTIN_MODELS: dict[str, Callable[[], System]] = {
+    "four_bar": four_bar,
+    "quick_return": quick_return,
+    "double_pendulum": double_pendulum,
+    "slider_crank": slider_crank,
+    "heavy_top": heavy_top,
+    "chaplygin_sleigh": chaplygin_sleigh,
+}
