@@ -53,6 +53,9 @@ def four_bar() -> System:
     system.add_constraint(l1 * cos(q1) + l2 * cos(q2) - l3 * cos(q3) - l4, name="loop x")
     system.add_constraint(l1 * sin(q1) + l2 * sin(q2) - l3 * sin(q3), name="loop y")
     system.add_torque("crank", tau, name="drive")
+    B = (l1 * cos(q1), l1 * sin(q1))
+    system.add_drawing_line([(0, 0), B, (l4 + l3 * cos(q3), l3 * sin(q3)), (l4, 0)], name="linkage")
+    system.add_trace((B[0] + l2 / 2 * cos(q2), B[1] + l2 / 2 * sin(q2)), name="coupler midpoint")
     return system
 
 
@@ -84,6 +87,12 @@ def quick_return() -> System:
     system.add_constraint(l_AH - l_AE * sin(phi2) - l_EF * sin(phi3), name="F on guide")
     system.add_constraint(l_AB * cos(phi2) - l_BC * sin(phi2 - phi1), name="D on AE")
     system.add_torque("crank", tau, name="drive")
+    C = (l_BC * cos(phi1), l_AB + l_BC * sin(phi1))
+    E = (l_AE * cos(phi2), l_AE * sin(phi2))
+    F = (E[0] + l_EF * cos(phi3), E[1] + l_EF * sin(phi3))
+    system.add_drawing_line([(0, l_AB), C], name="crank")
+    system.add_drawing_line([(0, 0), E, F], name="rocker and link")
+    system.add_trace(F, name="slider G")
     return system
 
 
@@ -108,13 +117,16 @@ def closed_chain(n: int, angles: str = "absolute") -> System:
     system = System(q, parameters=[*lengths, *masses, *inertias, xg, yg, g], gravity=(0, -g),
                     name=f"closed_chain_{n}_{angles}")
     joint = (sp.Integer(0), sp.Integer(0))
+    joints = [joint]
     angle = sp.Integer(0)
     for i in range(n):
         angle = q[i] if angles == "absolute" else angle + q[i]
         system.add_body(_bar(f"link {i + 1}", masses[i], inertias[i], joint, lengths[i], angle))
         joint = (joint[0] + lengths[i] * cos(angle), joint[1] + lengths[i] * sin(angle))
+        joints.append(joint)
     system.add_constraint(joint[0] - xg, name="tip x")
     system.add_constraint(joint[1] - yg, name="tip y")
+    system.add_drawing_line(joints, name="chain")
     return system
 
 
@@ -130,7 +142,11 @@ def double_pendulum() -> System:
     system = System([q1, q2], parameters=[l1, l2, m1, m2, I1, I2, g], gravity=(0, -g), name="double_pendulum")
     # Angle from the downward vertical = angle from the x-axis + pi/2.
     system.add_body(_bar("rod 1", m1, I1, (0, 0), l1, q1 - sp.pi / 2))
-    system.add_body(_bar("rod 2", m2, I2, (l1 * sin(q1), -l1 * cos(q1)), l2, q2 - sp.pi / 2))
+    elbow = (l1 * sin(q1), -l1 * cos(q1))
+    system.add_body(_bar("rod 2", m2, I2, elbow, l2, q2 - sp.pi / 2))
+    tip = (elbow[0] + l2 * sin(q2), elbow[1] - l2 * cos(q2))
+    system.add_drawing_line([(0, 0), elbow, tip], name="rods")
+    system.add_trace(tip, name="tip")
     return system
 
 
@@ -151,6 +167,7 @@ def slider_crank() -> System:
     system.add_constraint(l1 * cos(q1) + l2 * cos(q2) - x, name="pin x")
     system.add_constraint(l1 * sin(q1) + l2 * sin(q2), name="pin y")
     system.add_torque("crank", tau, name="drive")
+    system.add_drawing_line([(0, 0), (l1 * cos(q1), l1 * sin(q1)), (x, 0)], name="crank and rod")
     return system
 
 
@@ -176,6 +193,8 @@ def heavy_top() -> System:
     rotation = _rotation_z(psi) * _rotation_x(theta) * _rotation_z(phi)
     system.add_body(RigidBody("top", mass=m, inertia=sp.diag(Ixx, Ixx, Izz),
                               position=rotation * sp.Matrix([0, 0, l]), rotation=rotation))
+    system.add_drawing_line([(0, 0, 0), rotation * sp.Matrix([0, 0, 2 * l])], name="axis")
+    system.add_trace(rotation * sp.Matrix([0, 0, 2 * l]), name="axis tip")
     return system
 
 
@@ -194,6 +213,9 @@ def chaplygin_sleigh() -> System:
     system.add_body(PlanarBody("sleigh", mass=m, inertia=inertia, position=(x, y), angle=theta))
     xd, yd, thetad = system.speeds
     system.add_nonholonomic_constraint(-sin(theta) * xd + cos(theta) * yd - a * thetad, name="blade")
+    blade = (x - a * cos(theta), y - a * sin(theta))
+    system.add_drawing_line([blade, (x, y)], name="body")
+    system.add_trace(blade, name="blade")
     return system
 
 

@@ -35,6 +35,7 @@ __all__ = [
     "PointMass",
     "Spring",
     "Damper",
+    "DrawingLine",
     "System",
 ]
 
@@ -242,6 +243,14 @@ class Damper:
 
 
 @dataclass(frozen=True)
+class DrawingLine:
+    """A polyline of points (vectors of expressions of q) drawn in animations; joints are its vertices."""
+
+    name: str
+    points: tuple[sp.ImmutableMatrix, ...]
+
+
+@dataclass(frozen=True)
 class _NamedExpression:
     """A named scalar: a constraint or a potential term."""
 
@@ -296,6 +305,8 @@ class System:
         self.gravity = None
         self.bodies, self.constraints, self.nonholonomic_constraints = [], [], []
         self.springs, self.dampers, self.potentials, self.forces = [], [], [], []
+        self.drawing: list[DrawingLine] = []
+        self.traces: list[DrawingLine] = []
         if gravity is not None:
             vector = _vector(gravity, "gravity", (2, 3))
             self._check_symbols(vector, "gravity", allow_q=False)
@@ -519,6 +530,29 @@ class System:
             vector = _vector(torque, f"torque {name!r}", (3,))
         self._check_symbols(vector, f"torque {name!r}", allow_qd=True, allow_t=True)
         self.forces.append(_AppliedForce(name, "body torque", vector, body, frame))
+
+    def add_drawing_line(self, points, *, name: str | None = None) -> None:
+        """Add a polyline for animations: links are drawn as lines, joints as dots at the vertices."""
+        name = name or f"line {len(self.drawing) + 1}"
+        self._unique(self.drawing, name, "drawing line")
+        self.drawing.append(DrawingLine(name, self._drawing_points(points, f"drawing line {name!r}")))
+
+    def add_trace(self, point, *, name: str | None = None) -> None:
+        """Mark a point whose path animations draw."""
+        name = name or f"trace {len(self.traces) + 1}"
+        self._unique(self.traces, name, "trace")
+        self.traces.append(DrawingLine(name, self._drawing_points([point], f"trace {name!r}")))
+
+    def _drawing_points(self, points, what: str) -> tuple[sp.ImmutableMatrix, ...]:
+        if isinstance(points, str) or not isinstance(points, Iterable):
+            raise ModelError(f"{what}: expected a sequence of points, got {type(points).__name__}")
+        vectors = tuple(_vector(point, f"{what} point {k + 1}", (2, 3)) for k, point in enumerate(points))
+        if not vectors:
+            raise ModelError(f"{what}: needs at least one point")
+        for k, vector in enumerate(vectors):
+            self._check_dimension(vector.rows, f"{what} point {k + 1}")
+            self._check_symbols(vector, f"{what} point {k + 1}")
+        return vectors
 
     @property
     def degrees_of_freedom(self) -> int:
