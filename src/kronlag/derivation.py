@@ -27,6 +27,8 @@ from collections.abc import Callable
 
 import symengine as se
 import sympy as sp
+from sympy.core.add import _addsort
+from sympy.core.mul import _mulsort
 
 from .equations import Equations
 from .system import PlanarBody, PointMass, RigidBody, System, t
@@ -40,7 +42,15 @@ def _se_matrix(matrix: sp.MatrixBase) -> se.DenseMatrix:
 
 class _SympyConverter:
     """SymEngine -> SymPy, memoized so that a subexpression shared by many
-    entries (a sum of masses, a body velocity) is converted once."""
+    entries (a sum of masses, a body velocity) is converted once.
+
+    SymEngine's sums and products are already canonical (like terms
+    collected, powers combined), so most nodes are built with SymPy's
+    ``_from_args`` in SymPy's canonical argument order, skipping the costly
+    ``flatten``; the cases where SymPy would still change the node (a number
+    times a sum, nested sums or products, several numbers) go through the
+    ordinary constructors.  The result is identical to ``sympy.sympify``.
+    """
 
     def __init__(self):
         self.memo: dict = {}
@@ -57,9 +67,9 @@ class _SympyConverter:
             return expr._sympy_()
         args = [self(arg) for arg in expr.args]
         if isinstance(expr, se.Add):
-            return sp.Add(*args)
+            return _canonical_add(args)
         if isinstance(expr, se.Mul):
-            return sp.Mul(*args)
+            return _canonical_mul(args)
         if isinstance(expr, se.Pow):
             return sp.Pow(*args)
         function = getattr(sp, type(expr).__name__, None)
@@ -69,6 +79,25 @@ class _SympyConverter:
 
     def matrix(self, matrix: se.DenseMatrix) -> sp.ImmutableMatrix:
         return sp.ImmutableMatrix(matrix.rows, matrix.cols, [self(entry) for entry in matrix])
+
+
+def _canonical_add(args: list) -> sp.Expr:
+    numbers = [arg for arg in args if arg.is_Number]
+    terms = [arg for arg in args if not arg.is_Number]
+    if len(numbers) > 1 or any(term.is_Add for term in terms):
+        return sp.Add(*args)
+    _addsort(terms)
+    return sp.Add._from_args(numbers + terms)
+
+
+def _canonical_mul(args: list) -> sp.Expr:
+    numbers = [arg for arg in args if arg.is_Number]
+    factors = [arg for arg in args if not arg.is_Number]
+    if (len(numbers) > 1 or numbers == [sp.S.One] or any(factor.is_Mul for factor in factors)
+            or (numbers and len(factors) == 1 and factors[0].is_Add)):
+        return sp.Mul(*args)
+    _mulsort(factors)
+    return sp.Mul._from_args(numbers + factors)
 
 
 def _jacobian(vector: se.DenseMatrix, variables: list) -> se.DenseMatrix:
@@ -123,7 +152,7 @@ class _Accumulator:
         jacobian = se.DenseMatrix(jacobian.rows, len(support), [jacobian[r, k] for r in rows for k in support])
         qd = se.DenseMatrix(len(support), 1, [self.qd[k] for k in support])
         weighted = _weigh(weight, jacobian)  # W J, so J^T W = weighted^T
-        _scatter(self.mass_terms, factor, support, support, weighted.T * jacobian)
+        _scatter(self.mass_terms, factor, support, support, weighted.T * jacobian, symmetric=True)
         symbols = set().union(*(entry.free_symbols for entry in jacobian))
         derivatives = {k: jacobian.diff(qk) for k, qk in enumerate(self.q) if qk in symbols}
         if not derivatives:
@@ -132,30 +161,36 @@ class _Accumulator:
         for k, derivative in derivatives.items():
             jacobian_dot += derivative * self.qd[k]
         cross = weighted.T * jacobian_dot  # X = J^T W Jd, Md = X + X^T
-        _scatter(self.mass_rate_terms, factor, support, support, cross)
-        _scatter(self.mass_rate_terms, factor, support, support, cross.T)
+        _scatter(self.mass_rate_terms, factor, support, support, cross + cross.T, symmetric=True)
         weighted_velocity = (weighted * qd).T  # (W v)^T
         for i, derivative in derivatives.items():
             _scatter(self.second_terms, factor, [i], support, weighted_velocity * derivative)
             _scatter(self.second_terms, factor, [i], support, _weigh(weight, derivative * qd).T * jacobian)
 
-    def _sum(self, terms: dict) -> se.DenseMatrix:
+    def _sum(self, terms: dict, *, symmetric: bool = False) -> se.DenseMatrix:
         m = len(self.q)
-        return se.DenseMatrix(m, m, [_merge(terms[(i, j)]) if (i, j) in terms else 0
-                                     for i in range(m) for j in range(m)])
+        matrix = se.zeros(m, m)
+        for (i, j), pairs in terms.items():
+            matrix[i, j] = _merge(pairs)
+            if symmetric:
+                matrix[j, i] = matrix[i, j]
+        return matrix
 
     def matrices(self) -> tuple[se.DenseMatrix, se.DenseMatrix, se.DenseMatrix]:
         """``(M, Md, T2)``."""
-        return self._sum(self.mass_terms), self._sum(self.mass_rate_terms), self._sum(self.second_terms)
+        return (self._sum(self.mass_terms, symmetric=True), self._sum(self.mass_rate_terms, symmetric=True),
+                self._sum(self.second_terms))
 
 
-def _scatter(terms: dict, factor, rows: list, cols: list, block: se.DenseMatrix) -> None:
-    """Append ``(factor, entry)`` for the nonzero entries of ``block`` to ``terms[(rows[a], cols[b])]``."""
-    entries = iter(block)
-    for i in rows:
-        for j in cols:
-            entry = next(entries)
-            if not entry.is_zero:
+def _scatter(terms: dict, factor, rows: list, cols: list, block: se.DenseMatrix, *,
+             symmetric: bool = False) -> None:
+    """Append ``(factor, entry)`` for the nonzero entries of ``block`` to ``terms[(rows[a], cols[b])]``.
+
+    With ``symmetric`` only the upper triangle (``rows[a] <= cols[b]``) is kept.
+    """
+    for i, block_row in zip(rows, block.tolist()):
+        for j, entry in zip(cols, block_row):
+            if not entry.is_zero and (not symmetric or i <= j):
                 terms[(i, j)].append((factor, entry))
 
 

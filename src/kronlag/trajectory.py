@@ -1,0 +1,169 @@
+"""The result of :func:`kronlag.simulate`: a sampled solution of the equations of motion.
+
+A :class:`Trajectory` holds, at every output time ``t[k]``, the state of::
+
+    M(q) qdd + C(q, qd) qd + Phi_q^T lambda + A^T mu + g(q) = f_Q
+    f(q) = 0,   A(q) qd + b(q) = 0
+
+with time along the first axis of every array, and exports it as columns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from os import PathLike
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .numeric import NumericModel
+
+__all__ = ["Trajectory"]
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Solution of the equations of motion at the output times (``N = len(t)``).
+
+    Units are those of the model's parameters (SI if the user's are SI).
+
+    Attributes
+    ----------
+    t : (N,)
+        Output times.
+    q, qd, qdd : (N, m)
+        Coordinates, velocities and accelerations; ``qdd`` is recomputed at
+        ``t`` by ``model.forward_dynamics(q, qd, t)`` (no Baumgarte terms).
+    lam : (N, r)
+        Holonomic multipliers ``lambda`` at ``t`` (same computation).
+    mu : (N, s)
+        Nonholonomic multipliers ``mu`` at ``t``.
+    kinetic_energy, potential_energy : (N,)
+        ``T = 1/2 qd^T M qd`` and ``Pi(q)``.
+    position_residual : (N, r)
+        ``Phi(q)``.
+    velocity_residual : (N, r + s)
+        ``[Phi_q qd; A qd + b]``.
+    coordinate_names : tuple of str
+        Names of ``q`` (length m).
+    model : NumericModel
+        The model that was integrated.
+    method : str
+        Integration method that produced the trajectory.
+    status : int
+        0 on success, -1 if the integration failed (the arrays then hold the
+        solution up to the failure).
+    message : str
+        Solver report.
+    nfev, njev, steps : int
+        Right-hand-side (or residual) evaluations, Jacobian evaluations and
+        accepted steps.
+    wall_time : float
+        Seconds spent in :func:`kronlag.simulate`.
+
+    Notes
+    -----
+    The export columns (:meth:`columns`, :meth:`to_csv`, :meth:`to_npz`,
+    :meth:`to_dataframe`) are, in this order: ``t``; the coordinates by name
+    (``q1, q2, ...``); their velocities (``q1d, ...``) and accelerations
+    (``q1dd, ...``); ``lambda1 .. lambdar``; ``mu1 .. mus``;
+    ``kinetic_energy``; ``potential_energy``; ``position_residual1 ..
+    position_residualr``; ``velocity_residual1 .. velocity_residual(r+s)``.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    lam: np.ndarray
+    mu: np.ndarray
+    kinetic_energy: np.ndarray
+    potential_energy: np.ndarray
+    position_residual: np.ndarray
+    velocity_residual: np.ndarray
+    coordinate_names: tuple[str, ...]
+    model: NumericModel
+    method: str
+    status: int
+    message: str
+    nfev: int
+    njev: int
+    steps: int
+    wall_time: float
+
+    @property
+    def success(self) -> bool:
+        """``status == 0``."""
+        return self.status == 0
+
+    @property
+    def total_energy(self) -> np.ndarray:
+        """``T + Pi``, shape (N,)."""
+        return self.kinetic_energy + self.potential_energy
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def __repr__(self) -> str:
+        span = f"t=[{self.t[0]:g}, {self.t[-1]:g}]" if len(self.t) else "t=[]"
+        return (f"Trajectory(method={self.method!r}, status={self.status}, N={len(self.t)}, {span}, "
+                f"steps={self.steps}, nfev={self.nfev}, wall_time={self.wall_time:.3g} s)")
+
+    # -- export -----------------------------------------------------------------
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The export columns (see the class notes), each of shape (N,)."""
+        names = self.coordinate_names
+        blocks = [
+            (["t"], self.t[:, None]),
+            (list(names), self.q),
+            ([f"{name}d" for name in names], self.qd),
+            ([f"{name}dd" for name in names], self.qdd),
+            ([f"lambda{j + 1}" for j in range(self.lam.shape[1])], self.lam),
+            ([f"mu{k + 1}" for k in range(self.mu.shape[1])], self.mu),
+            (["kinetic_energy"], self.kinetic_energy[:, None]),
+            (["potential_energy"], self.potential_energy[:, None]),
+            ([f"position_residual{j + 1}" for j in range(self.position_residual.shape[1])],
+             self.position_residual),
+            ([f"velocity_residual{j + 1}" for j in range(self.velocity_residual.shape[1])],
+             self.velocity_residual),
+        ]
+        return {name: values[:, i] for labels, values in blocks for i, name in enumerate(labels)}
+
+    def to_csv(self, path: str | PathLike) -> None:
+        """Write the columns to a comma-separated file with a one-line header of column names."""
+        columns = self.columns()
+        data = np.column_stack(list(columns.values()))
+        np.savetxt(path, data, delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
+
+    def to_npz(self, path: str | PathLike) -> None:
+        """Write the columns, plus ``method``, ``status``, ``message``, ``nfev``, ``njev``,
+        ``steps`` and ``wall_time``, to a NumPy ``.npz`` archive (``numpy.load`` reads it)."""
+        metadata: dict[str, Any] = {"method": self.method, "status": self.status, "message": self.message,
+                                    "nfev": self.nfev, "njev": self.njev, "steps": self.steps,
+                                    "wall_time": self.wall_time}
+        np.savez(path, **self.columns(), **{key: np.asarray(value) for key, value in metadata.items()})
+
+    def to_dataframe(self):
+        """The columns as a :class:`pandas.DataFrame` (needs pandas)."""
+        try:
+            import pandas as pd
+        except ImportError as error:
+            raise ImportError("Trajectory.to_dataframe needs pandas: pip install pandas "
+                              "(or kronlag[dataframe])") from error
+        return pd.DataFrame(self.columns())
+
+    # -- graphics -----------------------------------------------------------------
+
+    def plot(self, **kwargs):
+        """Plot the trajectory; see :func:`kronlag.plotting.plot_trajectory`."""
+        from .plotting import plot_trajectory
+
+        return plot_trajectory(self, **kwargs)
+
+    def animate(self, path=None, **kwargs):
+        """Animate the mechanism; see :func:`kronlag.animation.animate`."""
+        from .animation import animate
+
+        return animate(self, path, **kwargs)

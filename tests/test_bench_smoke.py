@@ -1,0 +1,16 @@
+"""Smoke test: the derivation benchmark runs in quick mode and prints its table."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parents[1] / "bench" / "bench_derive.py"
+
+
+def test_bench_derive_quick():
+    proc = subprocess.run([sys.executable, str(BENCH), "--quick"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    out = proc.stdout
+    assert "absolute" in out and "relative" in out
+    assert "ratio (sympy/kronlag)" in out
+    assert "MISMATCH" not in out
