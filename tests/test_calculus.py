@@ -65,7 +65,8 @@ def test_matrix_derivative_small_example():
     assert matrix_derivative(A, [x1, x2]) == expected
 
 
-@pytest.mark.parametrize(("shape_a", "shape_b"), [((2, 3), (3, 2)), ((1, 1), (3, 4)), ((3, 1), (1, 3)), ((2, 2), (2, 2))])
+@pytest.mark.parametrize(("shape_a", "shape_b"), [((2, 3), (3, 2)), ((1, 1), (3, 4)), ((3, 1), (1, 3)),
+                                                  ((2, 2), (2, 2))])
 def test_kron_is_the_block_matrix_of_products(shape_a, shape_b):
     rng = random.Random(1)
     A = sp.Matrix(*shape_a, lambda i, j: rng.choice([0, rng.randint(-9, 9), sp.Symbol(f"a{i}{j}")]))

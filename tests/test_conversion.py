@@ -18,13 +18,13 @@ def test_converted_matrices_are_structurally_equal_to_sympify(system, monkeypatc
     captured = []
     original = derivation._SympyConverter.matrix
 
-    def capture(self, matrix):
+    def capture(self, matrix, shape):
         captured.append(matrix)
-        return original(self, matrix)
+        return original(self, matrix, shape)
 
     monkeypatch.setattr(derivation._SympyConverter, "matrix", capture)
     derivation.derive(system).C_christoffel
-    converter = derivation._SympyConverter()
+    converter = derivation._SympyConverter({})
     for matrix in captured:
         for entry in matrix:
             converted, reference = converter(entry), sp.sympify(entry)
@@ -34,4 +34,4 @@ def test_converted_matrices_are_structurally_equal_to_sympify(system, monkeypatc
 def test_number_times_sum_is_distributed_like_sympy():
     x, y = se.symbols("x y")
     expr = se.Mul(se.Rational(-1, 2), x + y) + 3 * x
-    assert derivation._SympyConverter()(expr) == sp.sympify(expr)
+    assert derivation._SympyConverter({})(expr) == sp.sympify(expr)

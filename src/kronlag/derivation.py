@@ -52,8 +52,9 @@ class _SympyConverter:
     ordinary constructors.  The result is identical to ``sympy.sympify``.
     """
 
-    def __init__(self):
+    def __init__(self, symbols: dict[str, sp.Symbol]):
         self.memo: dict = {}
+        self.symbols = symbols  # by name: keeps the assumptions of the user's symbols
 
     def __call__(self, expr):
         result = self.memo.get(expr)
@@ -63,6 +64,8 @@ class _SympyConverter:
         return result
 
     def _build(self, expr):
+        if isinstance(expr, se.Symbol) and expr.name in self.symbols:
+            return self.symbols[expr.name]
         if not expr.args:
             return expr._sympy_()
         args = [self(arg) for arg in expr.args]
@@ -77,8 +80,9 @@ class _SympyConverter:
             return expr._sympy_()
         return function(*args)
 
-    def matrix(self, matrix: se.DenseMatrix) -> sp.ImmutableMatrix:
-        return sp.ImmutableMatrix(matrix.rows, matrix.cols, [self(entry) for entry in matrix])
+    def matrix(self, matrix: se.DenseMatrix, shape: tuple[int, int]) -> sp.ImmutableMatrix:
+        """Convert ``matrix``; ``shape`` is given because SymEngine drops the column count of 0-row matrices."""
+        return sp.ImmutableMatrix(*shape, [self(entry) for entry in matrix])
 
 
 def _canonical_add(args: list) -> sp.Expr:
@@ -303,10 +307,11 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
     coriolis = mass_rate - second / 2
 
     simplifier = _simplifier(simplify)
-    converter = _SympyConverter()
+    converter = _SympyConverter({symbol.name: symbol for symbol in (
+        *system.coordinates, *system.speeds, *system.parameters, t)})
 
-    def public(matrix: se.DenseMatrix) -> sp.ImmutableMatrix:
-        converted = converter.matrix(matrix)
+    def public(matrix: se.DenseMatrix, rows: int = m, cols: int = m) -> sp.ImmutableMatrix:
+        converted = converter.matrix(matrix, (rows, cols))
         return converted.applyfunc(simplifier) if simplifier else converted
 
     def christoffel() -> sp.ImmutableMatrix:
@@ -320,12 +325,12 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
         M=public(mass),
         C=public(coriolis),
         christoffel_source=christoffel,
-        g=public(g),
-        Phi=public(constraints),
-        Phi_q=public(constraint_jacobian),
-        A=public(nonholonomic_matrix),
-        b=public(nonholonomic_offset),
-        f_Q=public(generalized_force),
+        g=public(g, m, 1),
+        Phi=public(constraints, len(system.constraints), 1),
+        Phi_q=public(constraint_jacobian, len(system.constraints), m),
+        A=public(nonholonomic_matrix, len(velocity_constraints), m),
+        b=public(nonholonomic_offset, len(velocity_constraints), 1),
+        f_Q=public(generalized_force, m, 1),
         potential_energy=simplifier(potential_expr) if simplifier else potential_expr,
         time=t,
     )

@@ -322,6 +322,8 @@ class System:
         for item in symbols:
             if not isinstance(item, sp.Symbol):
                 raise ModelError(f"{what} {item!r} is not a SymPy Symbol (got {type(item).__name__})")
+            if isinstance(item, sp.Dummy):
+                raise ModelError(f"{what} {item.name} is a Dummy; use sp.Symbol({item.name!r})")
         return symbols
 
     @property
@@ -367,6 +369,9 @@ class System:
             reason = "may not depend on the speeds"
         elif symbol == t:
             reason = "may not depend on time (only applied forces and torques may)"
+        elif symbol.name in {s.name for s in (*self.coordinates, *self.speeds, *self.parameters, t)}:
+            reason = ("uses a symbol that has the name of a declared one but other assumptions"
+                      " (use plain sp.Symbol(name))")
         else:
             reason = ("uses a symbol that is neither a coordinate nor a declared parameter"
                       " (add it to parameters=...)")

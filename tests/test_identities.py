@@ -1,0 +1,79 @@
+"""Structural identities of the derived matrices, for every built-in model.
+
+The Coriolis matrix of Eq. 22 and the Christoffel form share ``C qd``; only
+the Christoffel form makes ``Md - 2C`` skew-symmetric (checked here as
+``Md = C + C^T``, which is the same statement for a symmetric ``Md``).
+Comparisons are numeric at random points (see conftest); ``C(q, 0) = 0`` is exact.
+"""
+
+import random
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from conftest import MODEL_BUILDERS, assert_numerically_equal, derived, evaluate, random_values, state_symbols
+
+MODELS = list(MODEL_BUILDERS)
+
+
+@pytest.fixture(params=MODELS)
+def equations(request):
+    return derived(request.param)
+
+
+def test_shapes(equations):
+    m = len(equations.coordinates)
+    r, s = len(equations.system.constraints), len(equations.system.nonholonomic_constraints)
+    assert equations.M.shape == equations.C.shape == equations.C_christoffel.shape == (m, m)
+    assert equations.g.shape == equations.f_Q.shape == (m, 1)
+    assert (equations.Phi.shape, equations.Phi_q.shape) == ((r, 1), (r, m))
+    assert (equations.A.shape, equations.b.shape) == ((s, m), (s, 1))
+    assert equations.dM_dq.shape == (m, m * m)
+    assert equations.residual.shape == (m + r + s, 1)
+
+
+def test_mass_matrix_is_symmetric(equations):
+    assert_numerically_equal(equations.M, equations.M.T, state_symbols(equations))
+
+
+def test_mass_matrix_depends_on_q_only(equations):
+    assert not equations.M.free_symbols & (set(equations.speeds) | set(equations.accelerations))
+
+
+def test_coriolis_matrix_vanishes_at_rest(equations):
+    at_rest = dict.fromkeys(equations.speeds, 0)
+    for matrix in (equations.C, equations.C_christoffel):
+        assert matrix.subs(at_rest).applyfunc(sp.expand) == sp.zeros(*matrix.shape)
+
+
+def test_coriolis_forms_have_the_same_product(equations):
+    qd = sp.Matrix(equations.speeds)
+    assert_numerically_equal(equations.C * qd, equations.C_christoffel * qd, state_symbols(equations))
+
+
+def test_christoffel_form_makes_Md_minus_2C_skew_symmetric(equations):
+    christoffel = equations.C_christoffel
+    assert_numerically_equal(equations.Md, christoffel + christoffel.T, state_symbols(equations))
+
+
+def test_energy_identity_of_eq22(equations):
+    """``qd^T (Md - 2C) qd = 0`` for the C of Eq. 22."""
+    qd = sp.Matrix(equations.speeds)
+    assert_numerically_equal(qd.T * equations.Md * qd, 2 * qd.T * equations.C * qd, state_symbols(equations))
+
+
+def test_Md_is_theorem_1(equations):
+    """``Md = dM/dq (I ⊗ qd)``, built here with explicit Kronecker blocks."""
+    m = equations.M.rows
+    qd = sp.Matrix(equations.speeds)
+    identity_kron_qd = sp.diag(*[qd] * m)  # I_m ⊗ qd is block diagonal
+    assert_numerically_equal(equations.Md, equations.dM_dq * identity_kron_qd, state_symbols(equations))
+
+
+def test_mass_matrix_is_positive_definite(equations):
+    rng = random.Random(7)
+    for _ in range(5):
+        values = random_values(sorted(equations.M.free_symbols, key=str), rng, state_symbols(equations))
+        mass = np.array(evaluate(equations.M, values), dtype=float).reshape(equations.M.shape)
+        assert np.linalg.eigvalsh(mass).min() > 0
