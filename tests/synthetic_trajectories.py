@@ -19,6 +19,22 @@ FOUR_BAR_PARAMETERS = {"l1": 1.0, "l2": 3.0, "l3": 2.5, "l4": 3.0, "m1": 1.0, "m
 HEAVY_TOP_PARAMETERS = {"m": 1.0, "l": 0.5, "g": 9.81, "Ixx": 0.1, "Izz": 0.05}
 
 
+
+class ParameterModel:
+    """Stand-in for :class:`kronlag.numeric.NumericModel` with what the graphics read from it:
+    the system (``equations.system``) and constant parameter values."""
+
+    time_varying = False
+
+    def __init__(self, system, parameters: dict[str, float]):
+        self.equations = SimpleNamespace(system=system)
+        self.parameter_names = tuple(parameter.name for parameter in system.parameters)
+        self._values = np.array([parameters[name] for name in self.parameter_names])
+
+    def parameter_vector(self, t: float = 0.0) -> np.ndarray:
+        return self._values.copy()
+
+
 def four_bar_joints(q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Joints B (crank tip) and C (coupler-follower), shape (N, 2), for crank angles ``q1``.
 
@@ -42,7 +58,7 @@ def _trajectory(system, t: np.ndarray, q: np.ndarray, qd: np.ndarray, position_r
     n_constraints = position_residual.shape[1]
     phase = t[:, None] + np.arange(n_constraints)[None, :]
     kinetic = 0.5 * np.sum(qd ** 2, axis=1)
-    model = SimpleNamespace(equations=SimpleNamespace(system=system), parameters=parameters)
+    model = ParameterModel(system, parameters)
     return Trajectory(t=t, q=q, qd=qd, qdd=np.gradient(qd, t, axis=0), lam=np.sin(phase),
                       mu=np.zeros((len(t), 0)), kinetic_energy=kinetic, potential_energy=np.cos(t) - kinetic,
                       position_residual=position_residual, velocity_residual=velocity_residual,
@@ -56,9 +72,8 @@ def four_bar_trajectory(t: np.ndarray, *, crank_speed: float = 2 * np.pi) -> Tra
     p = FOUR_BAR_PARAMETERS
     q1 = crank_speed * t
     b, c = four_bar_joints(q1)
-    q2 = np.arctan2(c[:, 1] - b[:, 1], c[:, 0] - b[:, 0])
+    q2 = np.unwrap(np.arctan2(c[:, 1] - b[:, 1], c[:, 0] - b[:, 0]))
     q3 = np.unwrap(np.arctan2(c[:, 1], c[:, 0] - p["l4"]))
-    q2 = np.unwrap(q2)
     # Velocity loop closure: [-l2 sin q2, l3 sin q3; l2 cos q2, -l3 cos q3] [q2d; q3d] = crank_speed l1 [sin q1; -cos q1].
     matrix = np.stack([np.stack([-p["l2"] * np.sin(q2), p["l3"] * np.sin(q3)], axis=-1),
                        np.stack([p["l2"] * np.cos(q2), -p["l3"] * np.cos(q3)], axis=-1)], axis=1)

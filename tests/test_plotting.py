@@ -1,0 +1,94 @@
+"""kronlag.plotting: the time-history figure of a trajectory."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from PIL import Image
+from synthetic_trajectories import four_bar_trajectory, heavy_top_trajectory
+
+from kronlag.plotting import plot_trajectory
+
+CONSTRAINED_PANELS = ["Coordinates", "Velocities", "Lagrange multipliers", "Constraint drift", "Energy",
+                      "Total-energy drift"]
+
+
+@pytest.fixture(scope="module")
+def four_bar():
+    return four_bar_trajectory(np.linspace(0.0, 1.0, 101))
+
+
+def _titles(figure) -> list[str]:
+    return [axes.get_title() for axes in figure.axes]
+
+
+def _legend_labels(axes) -> list[str]:
+    return [text.get_text() for text in axes.get_legend().get_texts()]
+
+
+def test_png_is_written_and_shows_the_curves(four_bar, tmp_path):
+    path = tmp_path / "plot.png"
+    figure = four_bar.plot(path=path)  # Trajectory.plot delegates to plot_trajectory
+    image = np.asarray(Image.open(path).convert("RGB")).astype(int)
+    width, height = figure.get_size_inches() * figure.dpi
+    assert image.shape == (round(height), round(width), 3)
+    ink = (image < 200).any(axis=-1)
+    assert 0.02 < ink.mean() < 0.5
+    tab_blue = np.array([31, 119, 180])  # the first line of every panel
+    assert (np.abs(image - tab_blue).sum(axis=-1) < 30).sum() > 500
+
+
+def test_panels_are_titled_labelled_and_not_empty(four_bar):
+    figure = plot_trajectory(four_bar)
+    assert _titles(figure) == CONSTRAINED_PANELS
+    panels = dict(zip(CONSTRAINED_PANELS, figure.axes))
+    assert _legend_labels(panels["Coordinates"]) == ["$q_{1}$", "$q_{2}$", "$q_{3}$"]
+    assert _legend_labels(panels["Velocities"]) == [r"$\dot{q}_{1}$", r"$\dot{q}_{2}$", r"$\dot{q}_{3}$"]
+    assert _legend_labels(panels["Lagrange multipliers"]) == [r"$\lambda_{1}$", r"$\lambda_{2}$"]
+    assert panels["Constraint drift"].get_yscale() == "log"
+    for axes in figure.axes:
+        assert axes.lines and axes.get_ylabel()
+    assert [axes.get_xlabel() for axes in figure.axes[-2:]] == ["time $t$"] * 2
+    assert "four_bar" in figure.get_suptitle()
+    drift = panels["Total-energy drift"].lines[0].get_ydata()
+    total = four_bar.kinetic_energy + four_bar.potential_energy
+    np.testing.assert_allclose(drift, total - total[0])
+
+
+def test_unconstrained_model_has_no_multiplier_or_drift_panels():
+    figure = plot_trajectory(heavy_top_trajectory(np.linspace(0.0, 1.0, 21)))
+    assert _titles(figure) == ["Coordinates", "Velocities", "Energy", "Total-energy drift"]
+    assert _legend_labels(figure.axes[0]) == [r"$\psi$", r"$\theta$", r"$\phi$"]
+
+
+def test_failed_run_and_exact_constraints_are_reported(four_bar):
+    failed = dataclasses.replace(four_bar, status=-1, message="step size too small",
+                                 position_residual=np.zeros_like(four_bar.position_residual),
+                                 velocity_residual=np.zeros_like(four_bar.velocity_residual))
+    figure = plot_trajectory(failed)
+    assert "FAILED: step size too small" in figure.get_suptitle()
+    drift = figure.axes[CONSTRAINED_PANELS.index("Constraint drift")]
+    assert not drift.lines
+    assert [text.get_text() for text in drift.texts] == ["constraints satisfied exactly"]
+
+
+@pytest.mark.parametrize(("suffix", "magic"), [(".pdf", b"%PDF"), (".svg", b"<?xml")])
+def test_format_follows_the_extension(suffix, magic, tmp_path):
+    path = tmp_path / f"plot{suffix}"
+    plot_trajectory(heavy_top_trajectory(np.linspace(0.0, 1.0, 11)), path=path)
+    assert path.read_bytes().startswith(magic)
+
+
+def test_show_uses_pyplot(four_bar, monkeypatch):
+    import matplotlib.pyplot as plt
+
+    shown = []
+    monkeypatch.setattr(plt, "show", lambda: shown.append(True))
+    figure = plot_trajectory(four_bar, show=True)
+    try:
+        assert shown == [True]
+        assert plt.fignum_exists(figure.number)
+    finally:
+        plt.close(figure)
