@@ -138,7 +138,7 @@ class _Reader:
             return CONSTANTS[node.id]
         if node.id in FUNCTIONS:
             raise self.fail(f"the function {node.id!r} is used without calling it", node)
-        close = difflib.get_close_matches(node.id, list(self.symbols) + list(CONSTANTS), n=1)
+        close = difflib.get_close_matches(node.id, list(self.symbols) + list(CONSTANTS), n=1, cutoff=0.5)
         hint = f"; did you mean {close[0]!r}?" if close else ""
         raise self.fail(f"unknown symbol {node.id!r} (declare it as a coordinate or parameter){hint}", node)
 
@@ -182,11 +182,9 @@ class _Reader:
         return base ** exponent
 
     def call(self, node: ast.Call, depth: int) -> sp.Expr:
-        if not isinstance(node.func, ast.Name):
-            raise self.fail("only calls of the functions " + ", ".join(FUNCTIONS) + " are allowed", node)
-        if node.func.id not in FUNCTIONS:
-            raise self.fail(f"calling {node.func.id!r} is not allowed; functions are "
-                            + ", ".join(FUNCTIONS), node)
+        if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
+            callee = ast.get_source_segment(self.text, node.func) or type(node.func).__name__
+            raise self.fail(f"calling {callee!r} is not allowed; the functions are " + ", ".join(FUNCTIONS), node)
         function, arity = FUNCTIONS[node.func.id]
         if node.keywords:
             raise self.fail(f"keyword arguments are not allowed in a call of {node.func.id!r}", node)

@@ -1,0 +1,361 @@
+"""Whole tasks on a model file: check it, simulate it, run inverse dynamics along a
+prescribed motion.  The command-line interface is a thin shell over these.
+
+:func:`check_model` works on the symbolic equations alone; :func:`simulate_model`
+and :func:`inverse_dynamics_along` use the numeric layer
+(``Equations.numeric``, ``NumericModel.assemble`` / ``inverse_dynamics`` and
+:func:`kronlag.simulation.simulate`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import sympy as sp
+
+from .derivation import derive
+from .equations import Equations
+from .expressions import parse_expression
+from .modelfile import ModelFile
+from .system import ModelError, t
+
+if TYPE_CHECKING:
+    from .numeric import NumericModel
+    from .trajectory import Trajectory
+
+__all__ = [
+    "ModelCheck",
+    "check_model",
+    "numeric_model",
+    "initial_state",
+    "simulate_model",
+    "SimulationSummary",
+    "summarize",
+    "parse_drive",
+    "InverseDynamicsRun",
+    "inverse_dynamics_along",
+]
+
+
+# -- check ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ModelCheck:
+    """What :func:`check_model` found.
+
+    Attributes
+    ----------
+    name : str
+    m, r, s : int
+        Coordinates, holonomic and nonholonomic constraints.
+    degrees_of_freedom : int
+        ``m - r - s``.
+    missing_values : tuple of str
+        Parameters without a value (the numeric checks need them all).
+    rank_Phi_q, rank_A : int or None
+        Numeric ranks at the initial guess (``None`` when values are missing).
+    constraint_residual : float or None
+        ``max |Phi(q)|`` at the initial guess.
+    """
+
+    name: str
+    m: int
+    r: int
+    s: int
+    degrees_of_freedom: int
+    missing_values: tuple[str, ...]
+    rank_Phi_q: int | None
+    rank_A: int | None
+    constraint_residual: float | None
+
+    def report(self) -> str:
+        """A few lines of text for people."""
+        lines = [f"model {self.name}: m = {self.m} coordinates, r = {self.r} holonomic and "
+                 f"s = {self.s} nonholonomic constraints",
+                 f"degrees of freedom m - r - s = {self.degrees_of_freedom}"]
+        if self.missing_values:
+            lines.append("parameters without values: " + ", ".join(self.missing_values)
+                         + " (numeric checks skipped)")
+            return "\n".join(lines)
+        for label, rank, rows in (("Phi_q", self.rank_Phi_q, self.r), ("A", self.rank_A, self.s)):
+            if rows:
+                verdict = "full" if rank == rows else f"DEFICIENT: {rows - rank} dependent rows"
+                lines.append(f"rank of {label} at the initial guess: {rank} of {rows} ({verdict})")
+        if self.r:
+            lines.append(f"max |Phi(q)| at the initial guess: {self.constraint_residual:.3g}")
+        return "\n".join(lines)
+
+
+def _numbers(matrix: sp.MatrixBase, point: Mapping[sp.Symbol, float]) -> np.ndarray:
+    """Entries of ``matrix`` at ``point`` by substitution (shape kept)."""
+    floats = {symbol: sp.Float(value) for symbol, value in point.items()}
+    return np.array([[float(matrix[i, j].xreplace(floats).evalf()) for j in range(matrix.cols)]
+                     for i in range(matrix.rows)], dtype=float).reshape(matrix.shape)
+
+
+def check_model(model: ModelFile, *, equations: Equations | None = None) -> ModelCheck:
+    """Derive the equations and check the constraints at the initial guess.
+
+    Uses substitution into the symbolic matrices only (not the numeric layer).
+    """
+    eom = equations if equations is not None else derive(model.system)
+    m, r, s = eom.shape
+    system = model.system
+    missing = tuple(p.name for p in system.parameters if p.name not in model.values)
+    rank_phi = rank_a = residual = None
+    if not missing:
+        values = model.numeric_values()
+        q, qd = model.guess_vectors()
+        point = ({p: values[p.name] for p in system.parameters} | dict(zip(system.coordinates, q))
+                 | dict(zip(system.speeds, qd)))
+        rank_phi = int(np.linalg.matrix_rank(_numbers(eom.Phi_q, point))) if r else 0
+        rank_a = int(np.linalg.matrix_rank(_numbers(eom.A, point))) if s else 0
+        residual = float(np.max(np.abs(_numbers(eom.Phi, point)), initial=0.0))
+    return ModelCheck(name=system.name, m=m, r=r, s=s, degrees_of_freedom=m - r - s, missing_values=missing,
+                      rank_Phi_q=rank_phi, rank_A=rank_a, constraint_residual=residual)
+
+
+# -- numeric set-up -------------------------------------------------------------------
+
+
+def numeric_model(model: ModelFile, *, equations: Equations | None = None) -> NumericModel:
+    """``derive(model.system).numeric(values)`` with the file's parameter values."""
+    eom = equations if equations is not None else derive(model.system)
+    return eom.numeric(model.numeric_values())
+
+
+def initial_state(model: ModelFile, numeric: NumericModel) -> tuple[np.ndarray, np.ndarray]:
+    """Assemble ``(q0, qd0)`` from the file's guesses, holding its fixed coordinates and speeds."""
+    q, qd = model.guess_vectors()
+    names = [symbol.name for symbol in model.system.coordinates]
+    position = dict(zip(names, q))
+    speed = dict(zip(names, qd))
+    return numeric.assemble(q, fixed={name: position[name] for name in model.fixed} or None, qd_guess=qd,
+                            qd_fixed={name: speed[name] for name in model.qd_fixed} or None)
+
+
+# -- simulation -------------------------------------------------------------------------
+
+
+def simulate_model(model: ModelFile, *, t_end: float | None = None, method: str | None = None,
+                   rtol: float | None = None, atol: float | None = None) -> Trajectory:
+    """Assemble the initial state and simulate from 0 to ``t_end``.
+
+    Options left at ``None`` come from the file's ``[simulation]`` table.
+    """
+    from .simulation import simulate
+
+    numeric = numeric_model(model)
+    q0, qd0 = initial_state(model, numeric)
+    settings = model.simulation
+    return simulate(numeric, (0.0, settings.t_end if t_end is None else t_end), q0, qd0,
+                    method=method or settings.method, rtol=rtol or settings.rtol, atol=atol or settings.atol)
+
+
+@dataclass(frozen=True)
+class SimulationSummary:
+    """The figures of merit of a simulation run.
+
+    Attributes
+    ----------
+    success : bool
+    message, method : str
+    steps, points : int
+        Accepted integrator steps and stored output times.
+    t_final : float
+        The last time reached.
+    position_drift, velocity_drift : float
+        ``max |Phi(q)|`` and ``max |[Phi_q qd; A qd + b]|`` over the run.
+    energy_drift : float
+        ``max |E(t) - E(0)|`` of the total energy ``T + Pi`` (a conservation
+        check only for models without driving or dissipative forces).
+    relative_energy_drift : float
+        ``energy_drift`` over ``max(|E|)`` (0 if the energy is 0 throughout).
+    wall_time : float
+        Seconds.
+    """
+
+    success: bool
+    message: str
+    method: str
+    steps: int
+    points: int
+    t_final: float
+    position_drift: float
+    velocity_drift: float
+    energy_drift: float
+    relative_energy_drift: float
+    wall_time: float
+
+    def report(self) -> str:
+        """A few lines of text for people."""
+        status = "ok" if self.success else f"FAILED: {self.message}"
+        return "\n".join([
+            f"status: {status}",
+            f"method {self.method}: {self.steps} steps, {self.points} output points, t = 0 .. {self.t_final:g}",
+            f"max constraint drift: position {self.position_drift:.3g}, velocity {self.velocity_drift:.3g}",
+            f"energy drift: {self.energy_drift:.3g} (relative {self.relative_energy_drift:.3g})",
+            f"wall time: {self.wall_time:.3g} s",
+        ])
+
+
+def _largest(values: np.ndarray) -> float:
+    return float(np.max(np.abs(values), initial=0.0)) if values.size else 0.0
+
+
+def summarize(trajectory: Trajectory) -> SimulationSummary:
+    """Steps, constraint and energy drift and wall time of a trajectory."""
+    energy = trajectory.kinetic_energy + trajectory.potential_energy
+    drift = _largest(energy - energy[0]) if energy.size else 0.0
+    scale = _largest(energy)
+    return SimulationSummary(
+        success=trajectory.success, message=trajectory.message, method=trajectory.method,
+        steps=trajectory.steps, points=len(trajectory.t),
+        t_final=float(trajectory.t[-1]) if len(trajectory.t) else 0.0,
+        position_drift=_largest(trajectory.position_residual), velocity_drift=_largest(trajectory.velocity_residual),
+        energy_drift=drift, relative_energy_drift=drift / scale if scale else 0.0, wall_time=trajectory.wall_time)
+
+
+# -- inverse dynamics -----------------------------------------------------------------
+
+
+def parse_drive(text: str, model: ModelFile) -> tuple[str, sp.Expr]:
+    """Read ``"q1=<expression of t>"`` (as on the command line) into ``(coordinate, motion)``."""
+    name, separator, expression = text.partition("=")
+    name = name.strip()
+    coordinates = [q.name for q in model.system.coordinates]
+    if not separator or name not in coordinates:
+        raise ModelError(f"drive {text!r}: expected COORDINATE=EXPRESSION with a coordinate of "
+                         f"{', '.join(coordinates)}")
+    symbols = {p.name: p for p in model.system.parameters} | {"t": t}
+    return name, parse_expression(expression, symbols, what=f"drive {name}")
+
+
+@dataclass
+class InverseDynamicsRun:
+    """Actuator forces and multipliers along a prescribed motion.
+
+    Attributes
+    ----------
+    actuated : tuple of str
+        The driven coordinates; ``forces[:, k]`` is the generalized force on ``actuated[k]``.
+    t : (N,) ; q, qd, qdd : (N, m) ; forces : (N, len(actuated)) ; lam : (N, r) ; mu : (N, s)
+        Rows up to the first failure (if any).
+    message : str
+        Empty on success; otherwise why the run stopped.
+    """
+
+    actuated: tuple[str, ...]
+    coordinate_names: tuple[str, ...]
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    forces: np.ndarray
+    lam: np.ndarray
+    mu: np.ndarray
+    message: str = ""
+
+    @property
+    def success(self) -> bool:
+        """No failure along the motion."""
+        return not self.message
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """``t``, coordinates, speeds, accelerations, ``force_<q>``, ``lambda<j>``, ``mu<k>``."""
+        blocks = [(["t"], self.t[:, None]), (list(self.coordinate_names), self.q),
+                  ([f"{n}d" for n in self.coordinate_names], self.qd),
+                  ([f"{n}dd" for n in self.coordinate_names], self.qdd),
+                  ([f"force_{n}" for n in self.actuated], self.forces),
+                  ([f"lambda{j + 1}" for j in range(self.lam.shape[1])], self.lam),
+                  ([f"mu{k + 1}" for k in range(self.mu.shape[1])], self.mu)]
+        return {label: values[:, i] for labels, values in blocks for i, label in enumerate(labels)}
+
+    def save(self, path: str | Path) -> None:
+        """Write the columns to ``.csv`` or ``.npz`` (by the suffix)."""
+        path = Path(path)
+        columns = self.columns()
+        if path.suffix == ".npz":
+            np.savez(path, **columns, message=np.asarray(self.message))
+        elif path.suffix == ".csv":
+            np.savetxt(path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),
+                       comments="", fmt="%.17g")
+        else:
+            raise ModelError(f"{path}: inverse-dynamics results are written as .csv or .npz")
+
+    def report(self, *, rows: int = 11) -> str:
+        """A table of the forces and multipliers at up to ``rows`` evenly spaced times."""
+        columns = {k: v for k, v in self.columns().items() if k == "t" or k.startswith(("force_", "lambda", "mu"))}
+        picks = np.unique(np.linspace(0, len(self.t) - 1, min(rows, len(self.t))).round().astype(int)) \
+            if len(self.t) else []
+        lines = ["  ".join(f"{name:>12}" for name in columns)]
+        lines += ["  ".join(f"{values[i]:12.5g}" for values in columns.values()) for i in picks]
+        if self.forces.size:
+            peaks = ", ".join(f"{name} {np.max(np.abs(self.forces[:, k])):.5g}" for k, name in enumerate(self.actuated))
+            lines.append(f"max |force|: {peaks}")
+        if self.message:
+            lines.append(f"FAILED: {self.message}")
+        return "\n".join(lines)
+
+
+def inverse_dynamics_along(model: ModelFile, drives: Mapping[str, sp.Expr], times: Sequence[float] | np.ndarray,
+                           *, numeric: NumericModel | None = None) -> InverseDynamicsRun:
+    """Forces on the driven coordinates, and multipliers, along a prescribed motion.
+
+    At each time the driven coordinates follow ``drives`` (expressions of
+    ``t`` and parameters) with their first and second derivatives; the other
+    coordinates and speeds come from assembly (starting from the file's guess,
+    then from the previous time), and the accelerations from the constraints at
+    acceleration level, ``Phi_q qdd = gamma``, ``A qdd = gamma_nh``.
+
+    Raises
+    ------
+    ModelError
+        The drives are not one per degree of freedom or name unknown coordinates.
+    """
+    from .numeric import AssemblyError, SingularConfigurationError
+
+    system = model.system
+    names = tuple(q.name for q in system.coordinates)
+    unknown = [name for name in drives if name not in names]
+    if unknown:
+        raise ModelError(f"drives name unknown coordinates: {', '.join(unknown)}")
+    if len(drives) != system.degrees_of_freedom:
+        raise ModelError(f"{system.name} has {system.degrees_of_freedom} degrees of freedom (m - r - s) "
+                         f"and needs as many drives, got {len(drives)}: {', '.join(drives) or 'none'}")
+    numeric = numeric if numeric is not None else numeric_model(model)
+    values = model.numeric_values()
+    constants = {sp.Symbol(name): value for name, value in values.items()}
+    motions = {name: [sp.lambdify(t, sp.diff(expr.xreplace(constants), t, order), "numpy") for order in range(3)]
+               for name, expr in drives.items()}
+    driven = [names.index(name) for name in drives]
+    selector = np.eye(len(names))[driven]
+    q_guess, qd_guess = (np.array(vector) for vector in model.guess_vectors())
+    rows: list[tuple] = []
+    message = ""
+    for time in np.asarray(times, dtype=float):
+        position = {name: float(motion[0](time)) for name, motion in motions.items()}
+        speed = {name: float(motion[1](time)) for name, motion in motions.items()}
+        acceleration = np.array([float(motions[name][2](time)) for name in drives])
+        for name, value in position.items():
+            q_guess[names.index(name)] = value
+        try:
+            q, qd = numeric.assemble(q_guess, fixed=position, qd_guess=qd_guess, qd_fixed=speed)
+            lhs = np.vstack([numeric.Phi_q(q, time), numeric.A(q, time), selector])
+            rhs = np.concatenate([numeric.gamma(q, qd, time), numeric.gamma_nh(q, qd, time), acceleration])
+            qdd = np.linalg.solve(lhs, rhs)
+            result = numeric.inverse_dynamics(q, qd, qdd, actuated=tuple(drives), t=time)
+        except (AssemblyError, SingularConfigurationError, np.linalg.LinAlgError) as error:
+            message = f"at t = {time:g}: {error}"
+            break
+        rows.append((time, q, qd, qdd, result.forces, result.lam, result.mu))
+        q_guess, qd_guess = q.copy(), qd.copy()
+    widths = ((), (numeric.m,), (numeric.m,), (numeric.m,), (len(drives),), (numeric.r,), (numeric.s,))
+    arrays = [np.array([row[k] for row in rows], dtype=float).reshape(len(rows), *width)
+              for k, width in enumerate(widths)]
+    return InverseDynamicsRun(tuple(drives), names, *arrays, message=message)

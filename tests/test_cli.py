@@ -1,0 +1,233 @@
+"""The command line, end to end through ``kronlag.cli.main`` (and once as a process):
+outputs, files written, and exit codes 0 (ok), 2 (bad input), 1 (numerical failure)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from kronlag.cli import build_parser, main
+from kronlag.modelfile import example_names, example_path
+
+COMMANDS = ["models", "derive", "export", "check", "simulate", "inverse"]
+
+
+def run(capsys, *argv) -> tuple[int, str, str]:
+    code = main([str(arg) for arg in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def write_model(tmp_path, text: str, name: str = "model.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+POINT_MASS = """
+coordinates = ["x", "y"]
+[[bodies]]
+name = "ball"
+type = "point"
+mass = 1
+position = ["x", "y"]
+"""
+
+
+@pytest.mark.parametrize("command", [None, *COMMANDS])
+def test_help_on_every_command(capsys, command):
+    code, out, _ = run(capsys, *([command] if command else []), "--help")
+    assert code == 0
+    assert "usage: kronlag" in out
+    if command is None:
+        assert all(name in out for name in COMMANDS)
+
+
+def test_models_lists_every_example(capsys):
+    code, out, _ = run(capsys, "models")
+    assert code == 0
+    for name in example_names():
+        assert name in out
+    assert "Van Khang" in out and "built-in" in out
+
+
+def test_derive_json(capsys):
+    code, out, err = run(capsys, "derive", "chaplygin_sleigh", "--format", "json")
+    assert code == 0, err
+    data = json.loads(out)
+    assert data["coordinates"] == ["x", "y", "theta"]
+    assert set(data["matrices"]) >= {"M", "C", "C_christoffel", "g", "Phi_q", "A", "b", "f_Q"}
+
+
+@pytest.mark.parametrize("fmt, marker", [("text", "Eq. 23"), ("latex", r"\begin{aligned}"), ("markdown", "## C")])
+def test_derive_formats(capsys, fmt, marker):
+    code, out, err = run(capsys, "derive", "four_bar", "--format", fmt)
+    assert code == 0, err
+    assert marker in out and "C_christoffel" in out
+
+
+def test_derive_file_simplified_to_output(capsys, tmp_path):
+    target = tmp_path / "eom.tex"
+    code, _, err = run(capsys, "derive", example_path("chaplygin_sleigh"), "--simplify", "--format", "latex",
+                       "--output", target)
+    assert code == 0, err
+    assert r"\dot{\theta}" in target.read_text()
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed")
+def test_export_c_to_file_compiles(capsys, tmp_path):
+    target = tmp_path / "four_bar.c"
+    code, _, err = run(capsys, "export", "four_bar", "--lang", "c", "--output", target)
+    assert code == 0, err
+    subprocess.run(["gcc", "-std=c99", "-fsyntax-only", str(target)], check=True)
+
+
+def test_export_to_stdout(capsys):
+    code, out, _ = run(capsys, "export", "slider_crank", "--lang", "julia")
+    assert code == 0
+    assert "function slider_crank_M(t, q, qd, p)" in out
+
+
+def test_check_reports_freedom_and_rank(capsys):
+    code, out, err = run(capsys, "check", "four_bar")
+    assert code == 0, err
+    assert "degrees of freedom m - r - s = 1" in out
+    assert "rank of Phi_q at the initial guess: 2 of 2 (full)" in out
+
+
+def test_check_reports_dependent_constraints(capsys, tmp_path):
+    path = write_model(tmp_path, POINT_MASS + """
+[[constraints]]
+expression = "x - y"
+[[constraints]]
+expression = "2*x - 2*y"
+""")
+    code, out, _ = run(capsys, "check", path)
+    assert code == 0
+    assert "rank of Phi_q at the initial guess: 1 of 2 (DEFICIENT: 1 dependent rows)" in out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["check", "{bad}"], "bad.toml: bodies[0].position[1]: cannot read 'y + z': unknown symbol 'z'"),
+    (["derive", "{missing}"], "missing.toml: cannot read the file"),
+    (["simulate", "no_such_model"], "no example model named 'no_such_model'"),
+    (["simulate", "four_bar", "--output", "{tmp}/out.xlsx"], "--output"),
+    (["simulate", "four_bar", "--method", "magic"], "unknown method 'magic'"),
+    (["inverse", "four_bar", "--drive", "q9=t"], "expected COORDINATE=EXPRESSION"),
+    (["inverse", "four_bar", "--drive", "q1=os.system('x')"], "calling 'os.system' is not allowed"),
+    (["inverse", "four_bar", "--drive", "q1=t", "--drive", "q2=t"], "needs as many drives"),
+])
+def test_bad_input_exits_2_with_a_clean_message(capsys, tmp_path, argv, message):
+    bad = write_model(tmp_path, POINT_MASS.replace('position = ["x", "y"]', 'position = ["x", "y + z"]'), "bad.toml")
+    arguments = [arg.format(bad=bad, missing=tmp_path / "missing.toml", tmp=tmp_path) for arg in argv]
+    code, out, err = run(capsys, *arguments)
+    assert code == 2
+    assert err.startswith("kronlag: error: ") and message in err, err
+    assert "Traceback" not in err + out
+
+
+def test_usage_error_exits_2(capsys):
+    code, _, err = run(capsys, "export", "four_bar", "--lang", "cobol")
+    assert code == 2 and "invalid choice" in err
+
+
+def test_simulate_writes_trajectory_and_figure(capsys, tmp_path):
+    csv, figure = tmp_path / "traj.csv", tmp_path / "fig.png"
+    code, out, err = run(capsys, "simulate", "four_bar", "--t-end", "0.2", "--method", "projection",
+                         "--rtol", "1e-6", "--output", csv, "--plot", figure)
+    assert code == 0, err
+    for text in ("status: ok", "steps", "max constraint drift", "energy drift", "wall time"):
+        assert text in out
+    header = csv.read_text().splitlines()[0].split(",")
+    assert header[:4] == ["t", "q1", "q2", "q3"]
+    assert figure.stat().st_size > 0
+
+
+def test_simulate_npz_from_file_settings(capsys, tmp_path):
+    target = tmp_path / "traj.npz"
+    code, _, err = run(capsys, "simulate", example_path("chaplygin_sleigh"), "--t-end", "0.5", "--method",
+                       "projection", "--output", target)
+    assert code == 0, err
+    data = np.load(target)
+    assert data["t"][-1] == pytest.approx(0.5)
+    assert np.max(np.abs(data["velocity_residual1"])) < 1e-8
+
+
+def test_simulation_failure_exits_1_and_saves_the_partial_trajectory(capsys, tmp_path):
+    path = write_model(tmp_path, POINT_MASS + """
+[[generalized_forces]]
+force = ["1/(1 - t)**3", 0]
+[simulation]
+t_end = 1.5
+method = "projection"
+rtol = 1e-4
+atol = 1e-6
+""", "blowup.toml")
+    target = tmp_path / "partial.npz"
+    code, out, err = run(capsys, "simulate", path, "--output", target)
+    assert code == 1
+    assert "simulation failed" in err and str(target) in err
+    assert "FAILED" in out
+    assert 0.9 < np.load(target)["t"][-1] < 1.0 + 1e-9
+
+
+def test_assembly_failure_exits_1(capsys, tmp_path):
+    path = write_model(tmp_path, POINT_MASS + """
+[[constraints]]
+expression = "x**2 + 1"
+""")
+    code, _, err = run(capsys, "simulate", path)
+    assert code == 1
+    assert err.startswith("kronlag: numerical failure:")
+
+
+def test_inverse_dynamics_along_the_file_drive(capsys, tmp_path):
+    target = tmp_path / "inverse.csv"
+    code, out, err = run(capsys, "inverse", "four_bar", "--points", "11", "--output", target)
+    assert code == 0, err
+    assert "force_q1" in out and "lambda2" in out and "max |force|: q1" in out
+    table = np.genfromtxt(target, delimiter=",", names=True)
+    assert len(table) == 11
+    np.testing.assert_allclose(table["q1"], 1 + 2 * np.pi * table["t"], rtol=1e-12)
+    # Crank turning once per second: the torque is periodic.
+    assert table["force_q1"][0] == pytest.approx(table["force_q1"][-1], rel=1e-6)
+
+
+def test_inverse_dynamics_with_a_command_line_drive(capsys):
+    code, out, err = run(capsys, "inverse", "slider_crank", "--drive", "q1=0.5 + 3*t", "--t-end", "0.5",
+                         "--points", "5")
+    assert code == 0, err
+    assert "force_q1" in out
+
+
+def test_parser_has_a_command_per_task():
+    parser = build_parser()
+    assert parser.prog == "kronlag"
+
+
+def test_runs_as_a_program(tmp_path):
+    good = subprocess.run([sys.executable, "-m", "kronlag.cli", "check", "slider_crank"], capture_output=True,
+                          text=True, timeout=120)
+    assert good.returncode == 0, good.stderr
+    assert "degrees of freedom m - r - s = 1" in good.stdout
+    bad = write_model(tmp_path, "coordinates = 'q1'")
+    failed = subprocess.run([sys.executable, "-m", "kronlag.cli", "derive", str(bad)], capture_output=True,
+                            text=True, timeout=120)
+    assert failed.returncode == 2
+    assert failed.stderr == f"kronlag: error: {bad}: coordinates: expected a non-empty list of names, " \
+                            "got a string ('q1')\n"
+
+
+def test_missing_values_are_reported_by_check_and_refused_by_simulate(capsys, tmp_path):
+    path = write_model(tmp_path, POINT_MASS.replace('mass = 1', 'mass = "m"') + "[parameters]\nm = {unit = 'kg'}\n")
+    code, out, _ = run(capsys, "check", path)
+    assert code == 0
+    assert "parameters without values: m (numeric checks skipped)" in out
+    code, _, err = run(capsys, "simulate", path, "--method", "projection")
+    assert code == 2
+    assert err.startswith("kronlag: error: ") and "m" in err
