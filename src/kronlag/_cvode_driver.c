@@ -1,0 +1,323 @@
+/* kronlag compiled integrator: SUNDIALS CVODE on the Baumgarte index-1 ODE with
+ * coordinate projection after every step (CVodeSetProjFn).
+ *
+ * Appended to the C source of a kronlag NumericModel (NumericModel.c_source),
+ * which defines KRONLAG_M, KRONLAG_R, KRONLAG_S, KRONLAG_P,
+ *   kronlag_forward_dynamics(t, q, qd, p, alpha, beta, qdd, lam, mu)   and
+ *   kronlag_dynamics(t, q, qd, p, terms),  terms = [M (m*m), h (m), Phi (r),
+ *     Phi_q (r*m), gamma (r), A (s*m), b (s), gamma_nh (s)], row-major.
+ *
+ * State y = [q, qd] (2 m).  Right-hand side y' = [qd, qdd] with
+ *   [[M, Phi_q^T, A^T], [Phi_q, 0, 0], [A, 0, 0]] [qdd; lam; mu]
+ *     = [h; gamma - 2 alpha Phi_q qd - beta^2 Phi; gamma_nh - alpha (A qd + b)].
+ * Projection (after each step and at interpolated outputs):
+ *   q  <- q - Phi_q^T (Phi_q Phi_q^T)^-1 Phi(q)        (Gauss-Newton, until |Phi| <= atol / 100
+ *                                                       or the steps reach rounding level)
+ *   qd <- qd - B^T (B B^T)^-1 (B qd + c),  B = [Phi_q; A], c = [0; b].
+ *
+ * CVODE supports projection with BDF only, hence BDF (Newton, dense difference-quotient Jacobian).
+ *
+ * The scikit-sundae wheel ships the SUNDIALS 7 shared libraries but not their
+ * headers, so the few declarations needed are written out below (SUNDIALS 7.x,
+ * sunrealtype = double, sunindextype = int, no MPI: SUNComm = int); the symbols resolve at load
+ * time against those libraries, which kronlag.simulation loads first with global visibility. */
+
+typedef double sunrealtype;
+typedef int sunindextype;
+typedef int SUNComm;
+typedef struct _generic_N_Vector *N_Vector;
+typedef struct _generic_SUNMatrix *SUNMatrix;
+typedef struct _generic_SUNLinearSolver *SUNLinearSolver;
+typedef struct SUNContext_ *SUNContext;
+typedef int (*CVRhsFn)(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data);
+typedef int (*CVProjFn)(sunrealtype t, N_Vector ycur, N_Vector corr, sunrealtype epsProj, N_Vector err,
+                        void *user_data);
+
+extern int SUNDIALSGetVersionNumber(int *major, int *minor, int *patch, char *label, int len);
+extern int SUNContext_Create(SUNComm comm, SUNContext *ctx);
+extern int SUNContext_Free(SUNContext *ctx);
+extern int SUNContext_ClearErrHandlers(SUNContext ctx);
+extern N_Vector N_VNew_Serial(sunindextype length, SUNContext ctx);
+extern sunrealtype *N_VGetArrayPointer(N_Vector v);
+extern void N_VDestroy(N_Vector v);
+extern SUNMatrix SUNDenseMatrix(sunindextype rows, sunindextype cols, SUNContext ctx);
+extern void SUNMatDestroy(SUNMatrix A);
+extern SUNLinearSolver SUNLinSol_Dense(N_Vector y, SUNMatrix A, SUNContext ctx);
+extern int SUNLinSolFree(SUNLinearSolver S);
+extern void *CVodeCreate(int lmm, SUNContext ctx);
+extern int CVodeInit(void *mem, CVRhsFn f, sunrealtype t0, N_Vector y0);
+extern int CVodeSStolerances(void *mem, sunrealtype rtol, sunrealtype atol);
+extern int CVodeSetUserData(void *mem, void *data);
+extern int CVodeSetMaxNumSteps(void *mem, long mxsteps);
+extern int CVodeSetMaxStep(void *mem, sunrealtype hmax);
+extern int CVodeSetStopTime(void *mem, sunrealtype tstop);
+extern int CVodeSetMaxHnilWarns(void *mem, int mxhnil);
+extern int CVodeSetLinearSolver(void *mem, SUNLinearSolver LS, SUNMatrix A);
+extern int CVodeSetProjFn(void *mem, CVProjFn pfun);
+extern int CVode(void *mem, sunrealtype tout, N_Vector yout, sunrealtype *tret, int itask);
+extern int CVodeGetNumSteps(void *mem, long *n);
+extern int CVodeGetNumRhsEvals(void *mem, long *n);
+extern int CVodeGetNumLinRhsEvals(void *mem, long *n);
+extern int CVodeGetNumJacEvals(void *mem, long *n);
+extern int CVodeGetNumProjEvals(void *mem, long *n);
+extern char *CVodeGetReturnFlagName(long flag);
+extern void CVodeFree(void **mem);
+
+enum { KL_M = KRONLAG_M, KL_R = KRONLAG_R, KL_S = KRONLAG_S, KL_N = 2 * KRONLAG_M,
+       KL_K = KRONLAG_R + KRONLAG_S, KL_TERMS_ = KRONLAG_TERMS };
+enum { CV_BDF = 2, CV_NORMAL = 1, CV_ONE_STEP = 2, CV_TSTOP_RETURN = 1 };
+/* Offsets of the blocks of kronlag_dynamics' output. */
+enum { KL_PHI = KL_M * KL_M + KL_M, KL_PHI_Q = KL_PHI + KL_R, KL_A = KL_PHI_Q + KL_R * KL_M + KL_R,
+       KL_B = KL_A + KL_S * KL_M };
+#define KL_MAX_PROJECTION_ITERATIONS 8
+#define KL_STALL 1e-15  /* Gauss-Newton steps below KL_STALL (1 + |q|) end the iteration */
+#define KL_SETUP_FAILED (-1000)
+#define KL_VERSION_MISMATCH (-1001)
+#define KL_PROJECTION_FAILED (-1002)
+#define KL_TOO_MUCH_WORK (-1)  /* CV_TOO_MUCH_WORK */
+
+typedef struct {
+    const double *p;
+    double alpha, beta, tol;
+} kl_data;
+
+static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
+{
+    const kl_data *data = user_data;
+    const double *x = N_VGetArrayPointer(y);
+    double *dx = N_VGetArrayPointer(ydot);
+    double lam[KL_R + 1], mu[KL_S + 1];
+    memcpy(dx, x + KL_M, KL_M * sizeof(double));
+    /* A singular configuration is unrecoverable. */
+    return kronlag_forward_dynamics(t, x, x + KL_M, data->p, data->alpha, data->beta, dx + KL_M, lam, mu) ? -1 : 0;
+}
+
+/* x <- x - G^T (G G^T)^-1 (G x - d) for the k x m matrix G (row-major, rows first..first+k of
+ * `rows`), i.e. the least-norm correction; Cholesky of G G^T.  Returns nonzero if G G^T is singular. */
+static int kl_correct(const double *G, int k, const double *residual, double *x)
+{
+    double S[KL_K * KL_K + 1], w[KL_K + 1];
+    for (int i = 0; i < k; ++i)
+        for (int j = 0; j <= i; ++j) {
+            double sum = 0.0;
+            for (int c = 0; c < KL_M; ++c) sum += G[i * KL_M + c] * G[j * KL_M + c];
+            S[i * k + j] = sum;
+        }
+    for (int j = 0; j < k; ++j) {               /* S = L L^T in the lower triangle */
+        double d = S[j * k + j];
+        for (int c = 0; c < j; ++c) d -= S[j * k + c] * S[j * k + c];
+        if (!(d > 1e-300)) return 1;
+        S[j * k + j] = sqrt(d);
+        for (int i = j + 1; i < k; ++i) {
+            double sum = S[i * k + j];
+            for (int c = 0; c < j; ++c) sum -= S[i * k + c] * S[j * k + c];
+            S[i * k + j] = sum / S[j * k + j];
+        }
+    }
+    for (int i = 0; i < k; ++i) {              /* w = L^-T L^-1 residual */
+        double sum = residual[i];
+        for (int c = 0; c < i; ++c) sum -= S[i * k + c] * w[c];
+        w[i] = sum / S[i * k + i];
+    }
+    for (int i = k - 1; i >= 0; --i) {
+        double sum = w[i];
+        for (int c = i + 1; c < k; ++c) sum -= S[c * k + i] * w[c];
+        w[i] = sum / S[i * k + i];
+    }
+    for (int c = 0; c < KL_M; ++c)
+        for (int i = 0; i < k; ++i) x[c] -= G[i * KL_M + c] * w[i];
+    return 0;
+}
+
+/* The constraint rows B = [Phi_q; A] (k x m) and offsets c = [0; b] at q. */
+static void kl_constraints(double t, const double *q, const double *p, double *terms, double *B, double *c)
+{
+    double zero[KL_M];
+    memset(zero, 0, sizeof zero);
+    kronlag_dynamics(t, q, zero, p, terms);
+    memcpy(B, terms + KL_PHI_Q, KL_R * KL_M * sizeof(double));
+    memcpy(B + KL_R * KL_M, terms + KL_A, KL_S * KL_M * sizeof(double));
+    for (int i = 0; i < KL_R; ++i) c[i] = 0.0;
+    for (int i = 0; i < KL_S; ++i) c[KL_R + i] = terms[KL_B + i];
+}
+
+/* Project x = [q, qd] in place; with err != NULL also project err linearly (positions with Phi_q,
+ * velocities with B).  Returns 0, or 1 if the projection failed. */
+static int kl_project(double t, double *x, double *err, const kl_data *data)
+{
+    double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1], residual[KL_K + 1];
+    double *q = x, *qd = x + KL_M;
+    if (KL_R > 0) {
+        int converged = 0, stalled = 0;
+        for (int iteration = 0; iteration < KL_MAX_PROJECTION_ITERATIONS; ++iteration) {
+            kl_constraints(t, q, data->p, terms, B, c);
+            double largest = 0.0;
+            for (int i = 0; i < KL_R; ++i) largest = fmax(largest, fabs(terms[KL_PHI + i]));
+            if (largest <= data->tol || stalled) { converged = 1; break; }
+            double before[KL_M];
+            memcpy(before, q, sizeof before);
+            if (kl_correct(B, KL_R, terms + KL_PHI, q)) return 1;
+            stalled = 1;  /* a step at rounding level: Phi is as small as it gets */
+            for (int i = 0; i < KL_M; ++i)
+                if (fabs(q[i] - before[i]) > KL_STALL * (1.0 + fabs(q[i]))) stalled = 0;
+        }
+        if (!converged) return 1;
+    }
+    if (KL_K > 0) {
+        if (KL_R == 0) kl_constraints(t, q, data->p, terms, B, c);  /* else still current from the loop */
+        for (int i = 0; i < KL_K; ++i) {
+            double sum = c[i];
+            for (int j = 0; j < KL_M; ++j) sum += B[i * KL_M + j] * qd[j];
+            residual[i] = sum;
+        }
+        if (kl_correct(B, KL_K, residual, qd)) return 1;
+        if (err) {
+            for (int i = 0; i < KL_R; ++i) {
+                double sum = 0.0;
+                for (int j = 0; j < KL_M; ++j) sum += B[i * KL_M + j] * err[j];
+                residual[i] = sum;
+            }
+            if (KL_R > 0 && kl_correct(B, KL_R, residual, err)) return 1;
+            for (int i = 0; i < KL_K; ++i) {
+                double sum = 0.0;
+                for (int j = 0; j < KL_M; ++j) sum += B[i * KL_M + j] * err[KL_M + j];
+                residual[i] = sum;
+            }
+            if (kl_correct(B, KL_K, residual, err + KL_M)) return 1;
+        }
+    }
+    return 0;
+}
+
+static int kl_projection(sunrealtype t, N_Vector ycur, N_Vector corr, sunrealtype eps_proj, N_Vector err,
+                         void *user_data)
+{
+    (void)eps_proj;
+    const double *y = N_VGetArrayPointer(ycur);
+    double *dy = N_VGetArrayPointer(corr), x[KL_N];
+    memcpy(x, y, sizeof x);
+    if (kl_project(t, x, err ? N_VGetArrayPointer(err) : NULL, user_data)) return 1;
+    for (int i = 0; i < KL_N; ++i) dy[i] = x[i] - y[i];
+    return 0;
+}
+
+/* Name of a return value of kronlag_cvode. */
+const char *kronlag_cvode_flag_name(int flag)
+{
+    if (flag == KL_SETUP_FAILED) return "setting up CVODE failed";
+    if (flag == KL_VERSION_MISMATCH) return "the SUNDIALS library is not version 7";
+    if (flag == KL_PROJECTION_FAILED) return "the projection onto the constraints failed";
+    return CVodeGetReturnFlagName(flag);
+}
+
+/* Integrate from (t0, y0) to t1 in at most max_steps steps.  Outputs: the n_eval times t_eval
+ * (projected interpolants), or, with n_eval == 0, every step (max_steps + 1 rows at most):
+ * t_out (rows), y_out (rows x 2m), *n_out rows written; stats = [steps, right-hand sides, Jacobians, projections].  progress (may be
+ * NULL) is called with the time after every step.  Returns 0, or a negative CVODE flag
+ * (kronlag_cvode_flag_name) with the outputs up to the failure. */
+int kronlag_cvode(const double *p, double t0, double t1, const double *y0, int n_eval, const double *t_eval,
+                  double rtol, double atol, double alpha, double beta, double max_step, long max_steps,
+                  double *t_out, double *y_out, int *n_out, long *stats, void (*progress)(double))
+{
+    int major = 0, minor = 0, patch = 0;
+    char label[64];
+    SUNDIALSGetVersionNumber(&major, &minor, &patch, label, sizeof label);
+    if (major != 7) return KL_VERSION_MISMATCH;
+    kl_data data = {p, alpha, beta, atol / 100.0};
+    SUNContext ctx = NULL;
+    N_Vector y = NULL;
+    SUNMatrix J = NULL;
+    SUNLinearSolver LS = NULL;
+    void *mem = NULL;
+    int flag = KL_SETUP_FAILED, rows = 0;
+    if (SUNContext_Create(0, &ctx) || SUNContext_ClearErrHandlers(ctx)) goto done;
+    if (!(y = N_VNew_Serial(KL_N, ctx)) || !(J = SUNDenseMatrix(KL_N, KL_N, ctx))
+        || !(LS = SUNLinSol_Dense(y, J, ctx)) || !(mem = CVodeCreate(CV_BDF, ctx))) goto done;
+    double *x = N_VGetArrayPointer(y);
+    memcpy(x, y0, KL_N * sizeof(double));
+    if (CVodeInit(mem, kl_rhs, t0, y) || CVodeSStolerances(mem, rtol, atol) || CVodeSetUserData(mem, &data)
+        || CVodeSetLinearSolver(mem, LS, J) || CVodeSetProjFn(mem, kl_projection)
+        || CVodeSetMaxNumSteps(mem, max_steps) || CVodeSetStopTime(mem, t1) || CVodeSetMaxHnilWarns(mem, -1)
+        || (max_step > 0.0 && CVodeSetMaxStep(mem, max_step))) goto done;
+    flag = 0;
+    double t = t0;
+    if (n_eval == 0) {
+        t_out[0] = t0;
+        memcpy(y_out, x, KL_N * sizeof(double));
+        rows = 1;
+        while (t < t1) {
+            if (rows > max_steps) { flag = KL_TOO_MUCH_WORK; break; }
+            flag = CVode(mem, t1, y, &t, CV_ONE_STEP);
+            if (flag < 0) break;
+            t_out[rows] = t;
+            memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
+            ++rows;
+            if (progress) progress(t);
+        }
+    } else {
+        for (; rows < n_eval && t_eval[rows] <= t0; ++rows) {
+            t_out[rows] = t_eval[rows];
+            memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
+        }
+        for (; rows < n_eval; ++rows) {
+            long done = 0;
+            CVodeGetNumSteps(mem, &done);  /* max_steps counts all steps, not those per output */
+            if (done >= max_steps) { flag = KL_TOO_MUCH_WORK; break; }
+            CVodeSetMaxNumSteps(mem, max_steps - done);
+            flag = CVode(mem, t_eval[rows], y, &t, CV_NORMAL);
+            if (flag < 0) break;
+            if (kl_project(t, x, NULL, &data)) { flag = KL_PROJECTION_FAILED; break; }
+            t_out[rows] = t;
+            memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
+            if (progress) progress(t);
+        }
+    }
+    if (flag > 0) flag = 0;
+done:
+    *n_out = rows;
+    stats[0] = stats[1] = stats[2] = stats[3] = 0;
+    if (mem) {
+        long lin_rhs = 0;
+        CVodeGetNumSteps(mem, &stats[0]);
+        CVodeGetNumRhsEvals(mem, &stats[1]);
+        CVodeGetNumLinRhsEvals(mem, &lin_rhs);
+        stats[1] += lin_rhs;
+        CVodeGetNumJacEvals(mem, &stats[2]);
+        CVodeGetNumProjEvals(mem, &stats[3]);
+        CVodeFree(&mem);
+    }
+    if (LS) SUNLinSolFree(LS);
+    if (J) SUNMatDestroy(J);
+    if (y) N_VDestroy(y);
+    if (ctx) SUNContext_Free(&ctx);
+    return flag;
+}
+
+/* Derived outputs at the n states y (n x 2m) at times t: qdd (n x m), lam (n x r), mu (n x s) from
+ * forward dynamics without Baumgarte terms (NaN where the configuration is singular), the kinetic
+ * energy T = 1/2 qd^T M qd (n), Phi (n x r) and [Phi_q qd; A qd + b] (n x (r + s)). */
+void kronlag_outputs(const double *p, int n, const double *t, const double *y, double *qdd, double *lam,
+                     double *mu, double *kinetic, double *phi, double *velocity)
+{
+    double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1];
+    for (int k = 0; k < n; ++k) {
+        const double *q = y + k * KL_N, *qd = q + KL_M;
+        double *a = qdd + k * KL_M, *l = lam + k * KL_R, *u = mu + k * KL_S;
+        if (kronlag_forward_dynamics(t[k], q, qd, p, 0.0, 0.0, a, l, u)) {
+            for (int i = 0; i < KL_M; ++i) a[i] = NAN;
+            for (int i = 0; i < KL_R; ++i) l[i] = NAN;
+            for (int i = 0; i < KL_S; ++i) u[i] = NAN;
+        }
+        kl_constraints(t[k], q, p, terms, B, c);
+        double energy = 0.0;
+        for (int i = 0; i < KL_M; ++i)
+            for (int j = 0; j < KL_M; ++j) energy += qd[i] * terms[i * KL_M + j] * qd[j];
+        kinetic[k] = 0.5 * energy;
+        memcpy(phi + k * KL_R, terms + KL_PHI, KL_R * sizeof(double));
+        for (int i = 0; i < KL_K; ++i) {
+            double sum = c[i];
+            for (int j = 0; j < KL_M; ++j) sum += B[i * KL_M + j] * qd[j];
+            velocity[k * KL_K + i] = sum;
+        }
+    }
+}
