@@ -9,6 +9,16 @@ Kronecker-product matrix form of Lagrange's equations with multipliers
 from . import calculus, models
 from .derivation import derive
 from .equations import Equations
+from .numeric import (
+    AssemblyError,
+    ForwardDynamicsResult,
+    InverseDynamicsResult,
+    NumericModel,
+    RedundantConstraintsWarning,
+    SingularConfigurationError,
+)
+from .simulation import simulate
+from .trajectory import Trajectory
 from .system import (
     Damper,
     ModelError,
@@ -41,4 +51,12 @@ __all__ = [
     "speed_symbol",
     "acceleration_symbol",
     "t",
+    "NumericModel",
+    "ForwardDynamicsResult",
+    "InverseDynamicsResult",
+    "SingularConfigurationError",
+    "AssemblyError",
+    "RedundantConstraintsWarning",
+    "simulate",
+    "Trajectory",
 ]

@@ -167,6 +167,23 @@ class Equations:
         changes["christoffel_source"] = lambda: transform(self.C_christoffel)
         return replace(self, **changes)
 
+    # -- numerics ---------------------------------------------------------------
+
+    def numeric(self, parameters: dict, *, backend: str = "auto"):
+        """Generate and compile the numeric model (:class:`kronlag.numeric.NumericModel`).
+
+        Parameters
+        ----------
+        parameters : dict
+            Value of every parameter, keyed by name or symbol: a float, or a
+            callable ``f(t)`` for a time-varying one (e.g. a torque).
+        backend : {"auto", "numpy", "c"}
+            ``"auto"``: ``"c"`` when a C compiler is available, else ``"numpy"``.
+        """
+        from .numeric import NumericModel
+
+        return NumericModel(self, parameters, backend=backend)
+
     # -- printing ---------------------------------------------------------------
 
     @cached_property

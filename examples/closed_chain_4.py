@@ -1,0 +1,12 @@
+"""Closed chain of four links (a five-bar loop) in absolute angles.
+
+Simulates the shipped model file and writes ``closed_chain_4.png``.
+Run: ``python3 examples/closed_chain_4.py``.
+"""
+
+from kronlag.modelfile import load_example
+from kronlag.workflows import simulate_model
+
+trajectory = simulate_model(load_example("closed_chain_4"))
+print(trajectory.message)
+trajectory.plot(path="closed_chain_4.png")

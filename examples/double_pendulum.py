@@ -1,0 +1,12 @@
+"""Double pendulum of two uniform rods: energy is conserved, the motion is chaotic.
+
+Simulates the shipped model file and writes ``double_pendulum.png``.
+Run: ``python3 examples/double_pendulum.py``.
+"""
+
+from kronlag.modelfile import load_example
+from kronlag.workflows import simulate_model
+
+trajectory = simulate_model(load_example("double_pendulum"))
+print(trajectory.message)
+trajectory.plot(path="double_pendulum.png")

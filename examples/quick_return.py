@@ -1,0 +1,12 @@
+"""Quick-return mechanism of Van Khang (2011), Section 4.2: crank-driven rocker and slider.
+
+Simulates the shipped model file and writes ``quick_return.png``.
+Run: ``python3 examples/quick_return.py``.
+"""
+
+from kronlag.modelfile import load_example
+from kronlag.workflows import simulate_model
+
+trajectory = simulate_model(load_example("quick_return"))
+print(trajectory.message)
+trajectory.plot(path="quick_return.png")

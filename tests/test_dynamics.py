@@ -1,0 +1,232 @@
+"""Forward and inverse dynamics, assembly, redundant constraints and singular configurations."""
+
+from __future__ import annotations
+
+import functools
+import warnings
+
+import numpy as np
+import pytest
+import sympy as sp
+from conftest import derived
+from test_numeric import backend_params, numeric, parameter_values, random_state
+
+import kronlag
+from kronlag import models
+
+cos, sin = sp.cos, sp.sin
+
+FOUR_BAR = dict(l1=1.0, l2=2.5, l3=2.0, l4=2.8, m1=1.0, m2=2.0, m3=1.5, I1=0.1, I2=0.8, I3=0.4, g=9.81, tau=0.7)
+
+
+@functools.cache
+def four_bar(backend: str, redundant: bool = False, tau: float = 0.7) -> kronlag.NumericModel:
+    """The four-bar of the paper; ``redundant`` adds a third constraint, loop x + 2 loop y."""
+    system = models.four_bar()
+    if redundant:
+        l1, l2, l3, l4 = sp.symbols("l1 l2 l3 l4")
+        q1, q2, q3 = system.coordinates
+        system.add_constraint(l1 * cos(q1) + l2 * cos(q2) - l3 * cos(q3) - l4
+                              + 2 * (l1 * sin(q1) + l2 * sin(q2) - l3 * sin(q3)), name="redundant")
+    return kronlag.derive(system).numeric({**FOUR_BAR, "tau": tau}, backend=backend)
+
+
+def four_bar_state(model: kronlag.NumericModel) -> tuple[np.ndarray, np.ndarray]:
+    return model.assemble([1.0, 0.5, 1.5], fixed={"q1": 1.0}, qd_fixed={"q1": -2.0})
+
+
+def consistent_state(model: kronlag.NumericModel, seed: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """A random state, projected onto the constraints (positions held close to random)."""
+    q, qd, t = random_state(model.equations, seed)
+    if model.r:
+        q, _ = model.assemble(q)
+    G = np.vstack([model.Phi_q(q, t), model.A(q, t)])
+    target = np.concatenate([np.zeros(model.r), -model.b(q, t)])
+    if len(target):
+        qd = qd + np.linalg.lstsq(G, target - G @ qd, rcond=None)[0]
+    return q, qd, t
+
+
+MODELS = ["four_bar", "quick_return", "slider_crank", "heavy_top", "chaplygin_sleigh", "closed_chain_4_relative",
+          "double_pendulum"]
+
+
+@pytest.mark.parametrize("backend", backend_params())
+@pytest.mark.parametrize("name", MODELS)
+def test_forward_dynamics_solves_the_augmented_system(name, backend):
+    model = numeric(name, backend)
+    q, qd, t = consistent_state(model, 7)
+    for alpha, beta in ((0.0, 0.0), (5.0, 7.0)):
+        result = model.forward_dynamics(q, qd, t, alpha=alpha, beta=beta)
+        assert result.qdd.shape == (model.m,) and result.lam.shape == (model.r,) and result.mu.shape == (model.s,)
+        assert result.unique_multipliers and result.rank == model.r + model.s
+        M, Phi_q, A = model.M(q, t), model.Phi_q(q, t), model.A(q, t)
+        h = model.f_Q(q, qd, t) - model.Cqd(q, qd, t) - model.g(q, t)
+        residual = np.concatenate([
+            M @ result.qdd + Phi_q.T @ result.lam + A.T @ result.mu - h,
+            Phi_q @ result.qdd - (model.gamma(q, qd, t) - 2 * alpha * Phi_q @ qd - beta ** 2 * model.Phi(q, t)),
+            A @ result.qdd - (model.gamma_nh(q, qd, t) - alpha * (A @ qd + model.b(q, t)))])
+        scale = max(1.0, np.max(np.abs(M @ result.qdd)), np.max(np.abs(h)))
+        assert np.max(np.abs(residual)) < 1e-12 * scale
+
+
+@pytest.mark.parametrize("backend", backend_params())
+@pytest.mark.parametrize("name", ["four_bar", "quick_return", "closed_chain_4_relative", "chaplygin_sleigh"])
+def test_constraint_accelerations_by_finite_differences(name, backend):
+    """d/dt [Phi_q qd; A qd + b] = 0 along q + qd e + qdd e^2 / 2, independently of gamma."""
+    model = numeric(name, backend)
+    q, qd, t = consistent_state(model, 8)
+    qdd = model.forward_dynamics(q, qd, t).qdd
+
+    def velocity_constraints(e: float) -> np.ndarray:
+        qe, qde = q + qd * e + qdd * e ** 2 / 2, qd + qdd * e
+        return np.concatenate([model.Phi_q(qe, t) @ qde, model.A(qe, t) @ qde + model.b(qe, t)])
+
+    e = 1e-5
+    rate = (velocity_constraints(e) - velocity_constraints(-e)) / (2 * e)
+    assert np.max(np.abs(rate)) < 1e-6 * max(1.0, np.max(np.abs(qdd)))
+
+
+@pytest.mark.parametrize("backend", backend_params())
+def test_inverse_dynamics_returns_the_force_that_forward_dynamics_used(backend):
+    driven, free = four_bar(backend, tau=0.7), four_bar(backend, tau=0.0)
+    q, qd = four_bar_state(driven)
+    forward = driven.forward_dynamics(q, qd)
+    inverse = free.inverse_dynamics(q, qd, forward.qdd, actuated=("q1",))
+    np.testing.assert_allclose(inverse.forces, [0.7], rtol=1e-10)
+    np.testing.assert_allclose(inverse.lam, forward.lam, rtol=1e-10)
+    assert inverse.mu.shape == (0,) and inverse.unique
+    # and back: forward dynamics under the computed torque gives the prescribed acceleration
+    again = four_bar(backend, tau=float(inverse.forces[0])).forward_dynamics(q, qd)
+    np.testing.assert_allclose(again.qdd, forward.qdd, rtol=1e-10)
+
+
+@pytest.mark.parametrize("backend", backend_params())
+def test_inverse_dynamics_of_a_prescribed_motion(backend):
+    """Prescribed crank motion q1(t) = 1 + sin t; q2, q3 follow from the constraints."""
+    model = four_bar(backend, tau=0.0)
+    times = np.linspace(0.0, 1.0, 5)
+    states = []
+    q = np.array([1.0, 0.5, 1.5])
+    for time in times:
+        q, qd = model.assemble(q, fixed={"q1": 1 + np.sin(time)}, qd_fixed={"q1": np.cos(time)})
+        # qdd: crank acceleration -sin t, the others from Phi_q qdd = gamma
+        Phi_q = model.Phi_q(q)
+        qdd1 = -np.sin(time)
+        rest = np.linalg.solve(Phi_q[:, 1:], model.gamma(q, qd) - Phi_q[:, 0] * qdd1)
+        states.append((q, qd, np.concatenate([[qdd1], rest])))
+    q_path, qd_path, qdd_path = (np.array(x) for x in zip(*states))
+    result = model.inverse_dynamics_trajectory(times, q_path, qd_path, qdd_path, actuated=("q1",))
+    assert result.forces.shape == (5, 1) and result.lam.shape == (5, 2) and result.mu.shape == (5, 0)
+    for i, time in enumerate(times):
+        driven = kronlag.derive(models.four_bar()).numeric({**FOUR_BAR, "tau": float(result.forces[i, 0])},
+                                                            backend="numpy")
+        np.testing.assert_allclose(driven.forward_dynamics(q_path[i], qd_path[i], time).qdd, qdd_path[i],
+                                   rtol=1e-9, atol=1e-12)
+
+
+def test_inverse_dynamics_rejects_an_impossible_motion():
+    model = numeric("double_pendulum", "numpy")
+    with pytest.raises(ValueError, match="cannot produce this motion"):
+        model.inverse_dynamics([0.1, 0.2], [0.0, 0.0], [1.0, 1.0], actuated=("q1",))
+    with pytest.raises(ValueError, match="unknown actuated"):
+        model.inverse_dynamics([0.1, 0.2], [0.0, 0.0], [1.0, 1.0], actuated=("q7",))
+    both = model.inverse_dynamics([0.1, 0.2], [0.3, 0.0], [1.0, 1.0], actuated=("q1", sp.Symbol("q2")))
+    q, qd = np.array([0.1, 0.2]), np.array([0.3, 0.0])
+    np.testing.assert_allclose(both.forces, model.M(q) @ [1.0, 1.0] + model.Cqd(q, qd) + model.g(q), rtol=1e-12)
+
+
+@pytest.mark.parametrize("backend", backend_params())
+def test_assemble_holds_fixed_values(backend):
+    model = numeric("quick_return", backend)
+    guess = model.assemble(np.array([0.5, 1.4, 2.8]))[0] + 0.05
+    q, qd = model.assemble(guess, fixed={"phi1": guess[0]}, qd_fixed={"phi1": 1.5}, qd_guess=[1.0, 1.0, 1.0])
+    assert np.max(np.abs(model.Phi(q))) < 1e-12
+    assert q[0] == guess[0] and qd[0] == 1.5
+    assert np.max(np.abs(model.Phi_q(q) @ qd)) < 1e-12
+    sleigh = numeric("chaplygin_sleigh", backend)
+    q, qd = sleigh.assemble([0.0, 0.0, 0.3], qd_fixed={"x": 1.0, "theta": 0.5})
+    assert np.max(np.abs(sleigh.A(q) @ qd + sleigh.b(q))) < 1e-12
+    assert (qd[0], qd[2]) == (1.0, 0.5)
+
+
+def test_assembly_errors_give_the_residual():
+    model = four_bar("numpy")
+    # with D at l4 = 6 and the crank at q1 = 3, B is 6.99 from D: out of reach of l2 + l3 = 4.5
+    far = kronlag.derive(models.four_bar()).numeric({**FOUR_BAR, "l4": 6.0}, backend="numpy")
+    with pytest.raises(kronlag.AssemblyError, match="max \\|Phi\\|") as error:
+        far.assemble([1.0, 0.5, 1.5], fixed={"q1": 3.0})
+    assert error.value.residual > 1e-3
+    q, _ = four_bar_state(model)
+    with pytest.raises(kronlag.AssemblyError, match="velocity constraints"):
+        model.assemble(q, fixed={"q1": 1.0}, qd_fixed={"q1": 1.0, "q2": 1.0, "q3": 1.0})
+    with pytest.raises(ValueError, match="unknown coordinate"):
+        model.assemble(q, fixed={"x": 1.0})
+
+
+@pytest.mark.parametrize("backend", backend_params())
+def test_redundant_constraint_gives_the_same_accelerations(backend):
+    plain, redundant = four_bar(backend), four_bar(backend, redundant=True)
+    q, qd = four_bar_state(plain)
+    assert redundant.r == 3 and np.max(np.abs(redundant.Phi(q))) < 1e-12
+    reference = plain.forward_dynamics(q, qd, alpha=1.0, beta=2.0)
+    with pytest.warns(kronlag.RedundantConstraintsWarning, match="rank 2 < 3"):
+        result = redundant.forward_dynamics(q, qd, alpha=1.0, beta=2.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # warned once per model only
+        redundant.forward_dynamics(q, qd)
+    assert not result.unique_multipliers and result.rank == 2
+    np.testing.assert_allclose(result.qdd, reference.qdd, rtol=1e-10)
+    # the constraint forces Phi_q^T lambda are unique, the minimum-norm lambda is one split of them
+    np.testing.assert_allclose(redundant.Phi_q(q).T @ result.lam, plain.Phi_q(q).T @ reference.lam, rtol=1e-10)
+    assert np.linalg.norm(result.lam) < np.linalg.norm(reference.lam)
+
+
+def double_parallelogram() -> kronlag.System:
+    """Three equal cranks (pivots at x = 0, d, 2 d) carrying one coupler: overconstrained (Grübler: 0 dof).
+
+    Coordinates: crank angles q1, q3, q4 and coupler angle q2; crank 2 (q3) pins the
+    coupler's midpoint, crank 3 (q4) its end.  Really one degree of freedom.
+    """
+    q1, q2, q3, q4 = kronlag.coordinates("q1 q2 q3 q4")
+    l, d, m, m_c, inertia, inertia_c, g = sp.symbols("l d m m_c J J_c g")
+    system = kronlag.System([q1, q2, q3, q4], parameters=[l, d, m, m_c, inertia, inertia_c, g],
+                            gravity=(0, -g), name="double_parallelogram")
+    for i, (angle, x) in enumerate(((q1, 0), (q3, d), (q4, 2 * d))):
+        system.add_body(kronlag.PlanarBody(f"crank {i + 1}", mass=m, inertia=inertia, angle=angle,
+                                           position=(x + l / 2 * cos(angle), l / 2 * sin(angle))))
+    start = (l * cos(q1), l * sin(q1))
+    system.add_body(kronlag.PlanarBody("coupler", mass=m_c, inertia=inertia_c, angle=q2,
+                                       position=(start[0] + d * cos(q2), start[1] + d * sin(q2))))
+    for i, (angle, x, distance) in enumerate(((q3, d, d), (q4, 2 * d, 2 * d))):
+        system.add_constraint(start[0] + distance * cos(q2) - x - l * cos(angle), name=f"x{i}")
+        system.add_constraint(start[1] + distance * sin(q2) - l * sin(angle), name=f"y{i}")
+    return system
+
+
+@pytest.mark.parametrize("backend", backend_params())
+def test_overconstrained_parallelogram_against_its_one_degree_of_freedom_reference(backend):
+    values = dict(l=0.7, d=1.3, m=1.2, m_c=2.5, J=0.09, J_c=0.6, g=9.81)
+    model = kronlag.derive(double_parallelogram()).numeric(values, backend=backend)
+    theta, omega = 0.8, 1.7
+    q, qd = model.assemble([theta, 0.0, theta, theta], fixed={"q1": theta},
+                           qd_guess=[omega, 0, omega, omega], qd_fixed={"q1": omega})
+    np.testing.assert_allclose(q, [theta, 0.0, theta, theta], atol=1e-12)
+    with pytest.warns(kronlag.RedundantConstraintsWarning):
+        result = model.forward_dynamics(q, qd)
+    assert result.rank == 3 and not result.unique_multipliers
+    # one coordinate theta: T = 1/2 J_theta omega^2, Pi = g l cos... ; the coupler translates on a circle of radius l
+    l, m, m_c, inertia, g = (values[k] for k in ("l", "m", "m_c", "J", "g"))
+    j_theta = 3 * (inertia + m * l ** 2 / 4) + m_c * l ** 2
+    theta_dd = -g * l * (3 * m / 2 + m_c) * np.cos(theta) / j_theta
+    np.testing.assert_allclose(result.qdd, [theta_dd, 0.0, theta_dd, theta_dd], atol=1e-10)
+
+
+@pytest.mark.parametrize("backend", backend_params())
+def test_singular_configuration_is_an_error(backend):
+    values = {**parameter_values("double_pendulum"), "m2": 0.0, "I2": 0.0}
+    model = derived("double_pendulum").numeric(values, backend=backend)
+    with pytest.raises(kronlag.SingularConfigurationError, match=r"q = \[0.1, 0.2\]") as error:
+        model.forward_dynamics([0.1, 0.2], [0.0, 1.0], 0.5)
+    np.testing.assert_array_equal(error.value.qd, [0.0, 1.0])
+    assert error.value.t == 0.5
