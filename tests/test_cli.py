@@ -3,6 +3,7 @@ outputs, files written, and exit codes 0 (ok), 2 (bad input), 1 (numerical failu
 
 from __future__ import annotations
 
+import io
 import json
 import shutil
 import subprocess
@@ -11,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from kronlag.cli import build_parser, main
+from kronlag.cli import ProgressBar, build_parser, main
 from kronlag.modelfile import example_names, example_path
 
 COMMANDS = ["models", "derive", "export", "check", "simulate", "inverse"]
@@ -231,3 +232,24 @@ def test_missing_values_are_reported_by_check_and_refused_by_simulate(capsys, tm
     code, _, err = run(capsys, "simulate", path, "--method", "projection")
     assert code == 2
     assert err.startswith("kronlag: error: ") and "m" in err
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_bar_draws_on_a_terminal_after_its_delay():
+    terminal = _Terminal()
+    bar = ProgressBar(10.0, terminal, delay=0.0)
+    bar(2.5)
+    bar.close()
+    assert terminal.getvalue() == "\r[#######.......................] t = 2.5 / 10\n"
+
+
+def test_progress_bar_stays_silent_off_a_terminal():
+    log = io.StringIO()
+    bar = ProgressBar(10.0, log, delay=0.0)
+    bar(5.0)
+    bar.close()
+    assert log.getvalue() == ""

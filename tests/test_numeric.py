@@ -261,3 +261,16 @@ def test_fast_call_extension_and_ctypes_fallback_agree(monkeypatch):
         assert result.qdd.dtype == np.float64 and result.mu.shape == (0,)
         with pytest.raises(ValueError):
             model.forward_dynamics(q[:2], qd)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "c"])
+def test_single_coordinate_model_keeps_matrix_shapes(backend):
+    """A simple pendulum in one coordinate: M is 1 x 1 and qdd = -g/l sin q."""
+    angle, = kronlag.coordinates("q")
+    mass, length, gravity = sp.symbols("m l g")
+    system = kronlag.System([angle], parameters=[mass, length, gravity], gravity=(0, -gravity))
+    system.add_body(kronlag.PointMass("bob", mass=mass, position=(length * sp.sin(angle), -length * sp.cos(angle))))
+    model = kronlag.derive(system).numeric({"m": 2.0, "l": 0.5, "g": 9.81}, backend=backend)
+    assert model.M([0.3]).shape == (1, 1) and model.Phi_q([0.3]).shape == (0, 1)
+    assert model.kinetic_energy([0.3], [2.0]) == pytest.approx(0.5 * 2.0 * 0.5**2 * 2.0**2)
+    np.testing.assert_allclose(model.forward_dynamics([0.3], [2.0]).qdd, [-9.81 / 0.5 * np.sin(0.3)], rtol=1e-12)

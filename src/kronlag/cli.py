@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -79,13 +80,46 @@ def _check(arguments: argparse.Namespace) -> None:
     print(check_model(model).report())
 
 
+class ProgressBar:
+    """Draws the simulated time on a terminal, once a run has lasted ``delay`` seconds.
+
+    Called with the time after every integration step; redraws at most ten
+    times a second, and draws nothing on a stream that is not a terminal.
+    """
+
+    def __init__(self, t_end: float, stream, *, delay: float = 0.5, width: int = 30):
+        self.t_end, self.stream, self.delay, self.width = t_end, stream, delay, width
+        self.started = time.monotonic()
+        self.drawn_at: float | None = None
+        self.enabled = hasattr(stream, "isatty") and stream.isatty()
+
+    def __call__(self, t: float) -> None:
+        now = time.monotonic()
+        if not self.enabled or now - self.started < self.delay or (
+                self.drawn_at is not None and now - self.drawn_at < 0.1):
+            return
+        self.drawn_at = now
+        filled = int(self.width * min(max(t / self.t_end, 0.0), 1.0))
+        self.stream.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] t = {t:.4g} / {self.t_end:.4g}")
+        self.stream.flush()
+
+    def close(self) -> None:
+        """End the bar's line, if one was drawn."""
+        if self.drawn_at is not None:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
 def _simulate(arguments: argparse.Namespace) -> None:
     model = resolve_model(arguments.model)
     output = _output_path(arguments.output, _TRAJECTORY_SUFFIXES, "--output")
     figure = _output_path(arguments.plot, _PLOT_SUFFIXES, "--plot")
     movie = _output_path(arguments.animate, _ANIMATION_SUFFIXES, "--animate")
-    trajectory = simulate_model(model, t_end=arguments.t_end, method=arguments.method, rtol=arguments.rtol,
-                                atol=arguments.atol)
+    t_end = arguments.t_end if arguments.t_end is not None else model.simulation.t_end
+    bar = ProgressBar(t_end, sys.stderr)
+    trajectory = simulate_model(model, t_end=t_end, method=arguments.method, rtol=arguments.rtol,
+                                atol=arguments.atol, progress=bar)
+    bar.close()
     print(summarize(trajectory).report())
     if not trajectory.success:
         saved = output or Path(f"{model.system.name}-partial.npz")

@@ -41,6 +41,9 @@ __all__ = [
     "solve_augmented",
 ]
 
+#: Kernels whose result is a vector (all others are matrices, even when 1 x 1).
+_VECTOR_KERNELS = frozenset({"g", "Phi", "b", "f_Q", "Cqd", "gamma", "gamma_nh", "potential_energy"})
+
 
 class SingularConfigurationError(RuntimeError):
     """M is not positive definite on the null space of ``[Phi_q; A]`` at ``(q, qd, t)``."""
@@ -286,7 +289,7 @@ class NumericModel:
         library = self._library("accessors" if name in codegen.ACCESSOR_KERNELS else name)
         flat = library.evaluate(name, t, q, qd, self.parameter_vector(t))
         (block,) = library.kernels[name].blocks
-        return flat.reshape(block.shape) if block.shape[1] != 1 else flat
+        return flat if name in _VECTOR_KERNELS else flat.reshape(block.shape)
 
     def _vector(self, value, what: str) -> np.ndarray:
         vector = np.asarray(value, dtype=float)

@@ -9,7 +9,7 @@ and :func:`inverse_dynamics_along` use the numeric layer
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -143,10 +143,12 @@ def initial_state(model: ModelFile, numeric: NumericModel) -> tuple[np.ndarray, 
 
 
 def simulate_model(model: ModelFile, *, t_end: float | None = None, method: str | None = None,
-                   rtol: float | None = None, atol: float | None = None) -> Trajectory:
+                   rtol: float | None = None, atol: float | None = None,
+                   progress: Callable[[float], object] | None = None) -> Trajectory:
     """Assemble the initial state and simulate from 0 to ``t_end``.
 
-    Options left at ``None`` come from the file's ``[simulation]`` table.
+    Options left at ``None`` come from the file's ``[simulation]`` table;
+    ``progress`` is called with the time after every step.
     """
     from .simulation import simulate
 
@@ -154,7 +156,8 @@ def simulate_model(model: ModelFile, *, t_end: float | None = None, method: str 
     q0, qd0 = initial_state(model, numeric)
     settings = model.simulation
     return simulate(numeric, (0.0, settings.t_end if t_end is None else t_end), q0, qd0,
-                    method=method or settings.method, rtol=rtol or settings.rtol, atol=atol or settings.atol)
+                    method=method or settings.method, rtol=rtol or settings.rtol, atol=atol or settings.atol,
+                    progress=progress)
 
 
 @dataclass(frozen=True)
