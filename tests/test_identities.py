@@ -52,6 +52,12 @@ def test_coriolis_forms_have_the_same_product(equations):
     assert_numerically_equal(equations.C * qd, equations.C_christoffel * qd, state_symbols(equations))
 
 
+def test_body_by_body_velocity_terms_equal_C_qd(equations):
+    """``eom.Cqd`` (summed body by body) is the product ``C qd`` of Eq. 22."""
+    assert equations.Cqd.shape == (equations.M.rows, 1)
+    assert_numerically_equal(equations.Cqd, equations.C * sp.Matrix(equations.speeds), state_symbols(equations))
+
+
 def test_christoffel_form_makes_Md_minus_2C_skew_symmetric(equations):
     christoffel = equations.C_christoffel
     assert_numerically_equal(equations.Md, christoffel + christoffel.T, state_symbols(equations))

@@ -9,6 +9,7 @@ Kronecker-product matrix form of Lagrange's equations with multipliers
 from . import calculus, models
 from .derivation import derive
 from .equations import Equations
+from .modelfile import load_model
 from .numeric import (
     AssemblyError,
     ForwardDynamicsResult,
@@ -40,6 +41,7 @@ __all__ = [
     "models",
     "derive",
     "Equations",
+    "load_model",
     "System",
     "PlanarBody",
     "RigidBody",

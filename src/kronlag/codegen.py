@@ -189,12 +189,10 @@ class KernelSource:
 
     def _compute(self, name: str) -> list[list[se.Basic]]:
         eq = self.equations
-        if name in ("M", "C", "C_christoffel", "g", "Phi", "Phi_q", "A", "b", "f_Q"):
+        if name in ("M", "C", "Cqd", "C_christoffel", "g", "Phi", "Phi_q", "A", "b", "f_Q"):
             return self.convert.matrix(getattr(eq, name))
         if name == "potential_energy":
             return [[self.convert(sp.sympify(eq.potential_energy))]]
-        if name == "Cqd":
-            return [[se.Add(*[c * v for c, v in zip(row, self.qd)])] for row in self.matrix("C")]
         if name == "h":
             return [[f[0] - c[0] - g[0]] for f, c, g in
                     zip(self.matrix("f_Q"), self.matrix("Cqd"), self.matrix("g"))]

@@ -145,9 +145,15 @@ class _Accumulator:
         self.mass_terms: dict[tuple[int, int], list] = defaultdict(list)
         self.mass_rate_terms: dict[tuple[int, int], list] = defaultdict(list)
         self.second_terms: dict[tuple[int, int], list] = defaultdict(list)
+        self.velocity_terms: dict[tuple[int, int], list] = defaultdict(list)
 
-    def add(self, jacobian: se.DenseMatrix, weight) -> None:
-        """Add ``J^T W J``; ``weight`` is a scalar or a symmetric square matrix ``W``."""
+    def add(self, jacobian: se.DenseMatrix, weight, *, gradient: bool = True) -> None:
+        """Add ``J^T W J``; ``weight`` is a scalar or a symmetric square matrix ``W``.
+
+        ``gradient``: ``J`` is the Jacobian of a position or an angle (its
+        columns' derivatives are symmetric, ``dJ_i/dq_k = dJ_k/dq_i``); false
+        for the angular-velocity Jacobian of a spatial body.
+        """
         rows = range(jacobian.rows)
         support = [k for k in range(jacobian.cols) if any(not jacobian[r, k].is_zero for r in rows)]
         if not support:
@@ -167,23 +173,32 @@ class _Accumulator:
         cross = weighted.T * jacobian_dot  # X = J^T W Jd, Md = X + X^T
         _scatter(self.mass_rate_terms, factor, support, support, cross + cross.T, symmetric=True)
         weighted_velocity = (weighted * qd).T  # (W v)^T
+        # Velocity terms C qd = Md qd - dT/dq of this body: J^T W (Jd qd) + [(Jd_i - dJ/dq_i qd) . W v]_i;
+        # for a gradient J the bracket vanishes (Jd_i = dJ/dq_i qd).  Summed body by body these stay
+        # small where the entries of C, summed over l, would not.
+        _scatter(self.velocity_terms, factor, support, [0], weighted.T * (jacobian_dot * qd))
+        if not gradient:
+            _scatter(self.velocity_terms, factor, support, [0], jacobian_dot.T * weighted_velocity.T)
+            for i, derivative in derivatives.items():
+                _scatter(self.velocity_terms, factor, [i], [0], -weighted_velocity * (derivative * qd))
         for i, derivative in derivatives.items():
             _scatter(self.second_terms, factor, [i], support, weighted_velocity * derivative)
             _scatter(self.second_terms, factor, [i], support, _weigh(weight, derivative * qd).T * jacobian)
 
-    def _sum(self, terms: dict, *, symmetric: bool = False) -> se.DenseMatrix:
-        m = len(self.q)
-        matrix = se.zeros(m, m)
+    def _sum(self, terms: dict, *, columns: int, symmetric: bool = False) -> se.DenseMatrix:
+        matrix = se.zeros(len(self.q), columns)
         for (i, j), pairs in terms.items():
             matrix[i, j] = _merge(pairs)
             if symmetric:
                 matrix[j, i] = matrix[i, j]
         return matrix
 
-    def matrices(self) -> tuple[se.DenseMatrix, se.DenseMatrix, se.DenseMatrix]:
-        """``(M, Md, T2)``."""
-        return (self._sum(self.mass_terms, symmetric=True), self._sum(self.mass_rate_terms, symmetric=True),
-                self._sum(self.second_terms))
+    def matrices(self) -> tuple[se.DenseMatrix, se.DenseMatrix, se.DenseMatrix, se.DenseMatrix]:
+        """``(M, Md, T2, C qd)``."""
+        m = len(self.q)
+        return (self._sum(self.mass_terms, columns=m, symmetric=True),
+                self._sum(self.mass_rate_terms, columns=m, symmetric=True),
+                self._sum(self.second_terms, columns=m), self._sum(self.velocity_terms, columns=1))
 
 
 def _scatter(terms: dict, factor, rows: list, cols: list, block: se.DenseMatrix, *,
@@ -261,7 +276,7 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
             rotation_jacobians[body.name] = angle_jacobian
         elif isinstance(body, RigidBody):
             rotation_jacobian = _rotation_jacobian(body, q)
-            accumulator.add(rotation_jacobian, _se_matrix(body.inertia))
+            accumulator.add(rotation_jacobian, _se_matrix(body.inertia), gradient=False)
             rotation_jacobians[body.name] = rotation_jacobian
         else:
             assert isinstance(body, PointMass)
@@ -303,7 +318,7 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
     nonholonomic_offset = se.DenseMatrix(len(velocity_constraints), 1,
                                          [h.subs(zero_speeds) for h in velocity_constraints])
 
-    mass, mass_rate, second = accumulator.matrices()
+    mass, mass_rate, second, velocity_terms = accumulator.matrices()
     coriolis = mass_rate - second / 2
 
     simplifier = _simplifier(simplify)
@@ -324,6 +339,7 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
         system=system,
         M=public(mass),
         C=public(coriolis),
+        Cqd=public(velocity_terms, m, 1),
         christoffel_source=christoffel,
         g=public(g, m, 1),
         Phi=public(constraints, len(system.constraints), 1),

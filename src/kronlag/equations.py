@@ -18,7 +18,7 @@ __all__ = ["Equations", "MATRIX_NAMES"]
 
 #: The matrices an :class:`Equations` object holds, in the order they are printed.
 MATRIX_NAMES = ("M", "C", "C_christoffel", "g", "Phi", "Phi_q", "A", "b", "f_Q")
-_FIELD_MATRICES = tuple(name for name in MATRIX_NAMES if name != "C_christoffel")
+_FIELD_MATRICES = tuple(name for name in MATRIX_NAMES if name != "C_christoffel") + ("Cqd",)
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,6 +41,10 @@ class Equations:
     C_christoffel : (m, m)
         Christoffel-symbol form ``C_ij = sum_k 1/2 (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i) qd_k``;
         same product ``C qd`` as ``C``, and ``Md - 2 C_christoffel`` is skew-symmetric.
+    Cqd : (m, 1)
+        ``C qd``, the velocity terms of Lagrange's equations, summed body by body
+        (``J^T W Jd qd`` for a translation); equal to ``C * qd`` but far smaller
+        for long chains, which is what the numeric model evaluates.
     g : (m, 1)
         ``(dPi/dq)^T``, the gradient of the potential energy.
     Phi : (r, 1)
@@ -58,6 +62,7 @@ class Equations:
     system: System
     M: sp.ImmutableMatrix
     C: sp.ImmutableMatrix
+    Cqd: sp.ImmutableMatrix
     g: sp.ImmutableMatrix
     Phi: sp.ImmutableMatrix
     Phi_q: sp.ImmutableMatrix
