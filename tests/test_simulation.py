@@ -16,6 +16,7 @@ Phi_q of the paper (method.md) and the reduced accelerations.
 from __future__ import annotations
 
 import functools
+import warnings
 
 import numpy as np
 import pytest
@@ -295,3 +296,24 @@ def test_plot_delegates_to_plotting():
     matplotlib.use("Agg")
     figure = four_bar_run("compiled", 0.5).plot()
     assert isinstance(figure, matplotlib.figure.Figure)
+
+
+@pytest.mark.parametrize("method", ["baumgarte", "projection", "compiled"])
+def test_redundant_constraints_give_the_same_motion(method):
+    """A third loop equation (loop x + 2 loop y) makes Phi_q rank-deficient: same motion."""
+    system = kronlag.models.four_bar()
+    l1, l2, l3, l4 = sp.symbols("l1 l2 l3 l4")
+    q1, q2, q3 = system.coordinates
+    system.add_constraint(l1 * sp.cos(q1) + l2 * sp.cos(q2) - l3 * sp.cos(q3) - l4
+                          + 2 * (l1 * sp.sin(q1) + l2 * sp.sin(q2) - l3 * sp.sin(q3)), name="redundant")
+    redundant = kronlag.derive(system).numeric({**FOUR_BAR, "tau": 0.5})
+    plain = four_bar_model(tau=0.5)
+    q0, qd0 = plain.assemble([1.0, 0.5, 1.5], fixed={"q1": 1.0}, qd_fixed={"q1": 2.0})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", kronlag.RedundantConstraintsWarning)
+        assert not redundant.forward_dynamics(q0, qd0).unique_multipliers
+        reference = kronlag.simulate(plain, (0.0, 1.0), q0, qd0, method=method, t_eval=T_EVAL[:11])
+        trajectory = kronlag.simulate(redundant, (0.0, 1.0), q0, qd0, method=method, t_eval=T_EVAL[:11])
+    assert trajectory.success, trajectory.message
+    np.testing.assert_allclose(trajectory.q, reference.q, atol=1e-7)
+    assert np.max(np.abs(trajectory.position_residual)) < 1e-9

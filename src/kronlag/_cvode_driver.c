@@ -69,6 +69,7 @@ enum { CV_ADAMS = 1, CV_NORMAL = 1, CV_ONE_STEP = 2, CV_TSTOP_RETURN = 1 };
 enum { KL_PHI = KL_M * KL_M + KL_M, KL_PHI_Q = KL_PHI + KL_R, KL_A = KL_PHI_Q + KL_R * KL_M + KL_R,
        KL_B = KL_A + KL_S * KL_M };
 #define KL_MAX_PROJECTION_ITERATIONS 8
+#define KL_DEPENDENT 1e-10  /* relative pivot of G G^T below which a constraint row is dependent */
 #define KL_STALL 1e-15  /* Gauss-Newton steps below KL_STALL (1 + |q|) end the iteration */
 #define KL_SETUP_FAILED (-1000)
 #define KL_VERSION_MISMATCH (-1001)
@@ -91,11 +92,14 @@ static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
     return kronlag_forward_dynamics(t, x, x + KL_M, data->p, data->alpha, data->beta, dx + KL_M, lam, mu) ? -1 : 0;
 }
 
-/* x <- x - G^T (G G^T)^-1 (G x - d) for the k x m matrix G (row-major, rows first..first+k of
- * `rows`), i.e. the least-norm correction; Cholesky of G G^T.  Returns nonzero if G G^T is singular. */
+/* x <- x - G^T w with (G G^T) w = residual for the k x m matrix G (row-major): the least-norm
+ * correction.  Cholesky of G G^T; a pivot below KL_DEPENDENT times its diagonal marks a row that
+ * depends on earlier ones (redundant constraints), whose w is 0, so the correction satisfies the
+ * independent rows and, for a consistent residual, all.  Returns nonzero if every row is zero. */
 static int kl_correct(const double *G, int k, const double *residual, double *x)
 {
     double S[KL_K * KL_K + 1], w[KL_K + 1];
+    int independent[KL_K + 1], any = 0;
     for (int i = 0; i < k; ++i)
         for (int j = 0; j <= i; ++j) {
             double sum = 0.0;
@@ -103,25 +107,27 @@ static int kl_correct(const double *G, int k, const double *residual, double *x)
             S[i * k + j] = sum;
         }
     for (int j = 0; j < k; ++j) {               /* S = L L^T in the lower triangle */
-        double d = S[j * k + j];
+        double diagonal = S[j * k + j], d = diagonal;
         for (int c = 0; c < j; ++c) d -= S[j * k + c] * S[j * k + c];
-        if (!(d > 1e-300)) return 1;
-        S[j * k + j] = sqrt(d);
+        independent[j] = d > KL_DEPENDENT * diagonal && d > 1e-300;
+        any |= independent[j];
+        S[j * k + j] = independent[j] ? sqrt(d) : 1.0;
         for (int i = j + 1; i < k; ++i) {
             double sum = S[i * k + j];
             for (int c = 0; c < j; ++c) sum -= S[i * k + c] * S[j * k + c];
-            S[i * k + j] = sum / S[j * k + j];
+            S[i * k + j] = independent[j] ? sum / S[j * k + j] : 0.0;
         }
     }
-    for (int i = 0; i < k; ++i) {              /* w = L^-T L^-1 residual */
+    if (!any) return 1;
+    for (int i = 0; i < k; ++i) {              /* w = L^-T L^-1 residual over the independent rows */
         double sum = residual[i];
         for (int c = 0; c < i; ++c) sum -= S[i * k + c] * w[c];
-        w[i] = sum / S[i * k + i];
+        w[i] = independent[i] ? sum / S[i * k + i] : 0.0;
     }
     for (int i = k - 1; i >= 0; --i) {
         double sum = w[i];
         for (int c = i + 1; c < k; ++c) sum -= S[c * k + i] * w[c];
-        w[i] = sum / S[i * k + i];
+        w[i] = independent[i] ? sum / S[i * k + i] : 0.0;
     }
     for (int c = 0; c < KL_M; ++c)
         for (int i = 0; i < k; ++i) x[c] -= G[i * KL_M + c] * w[i];

@@ -113,10 +113,12 @@ class MultibodyProblem:
         in the Euclidean norm), until ``max |Phi| <= tol`` or a step is at rounding
         level (``|dq| <= 1e-15 (1 + |q|)``)::
 
-            q <- q - Phi_q^T (Phi_q Phi_q^T)^-1 Phi(q)
+            q <- q - Phi_q^+ Phi(q)
 
         then velocities onto ``B qd + c = 0`` with ``B = [Phi_q; A]`` (r + s, m)
-        and ``c = [0; b]`` in one step, ``qd <- qd - B^T (B B^T)^-1 (B qd + c)``.
+        and ``c = [0; b]`` in one step, ``qd <- qd - B^+ (B qd + c)``.  The
+        pseudo-inverses (least squares, minimum norm) keep redundant
+        constraints, a rank-deficient ``Phi_q``, working.
 
         Raises
         ------
@@ -131,7 +133,7 @@ class MultibodyProblem:
             if not model.r or stalled or np.max(np.abs(terms["Phi"])) <= tol:
                 break
             jacobian = terms["Phi_q"]
-            step = jacobian.T @ np.linalg.solve(jacobian @ jacobian.T, terms["Phi"])
+            step = np.linalg.lstsq(jacobian, terms["Phi"], rcond=None)[0]
             q -= step
             stalled = bool(np.all(np.abs(step) <= _STALL * (1 + np.abs(q))))
             terms = model.dynamics_terms(q, qd, t)
@@ -141,7 +143,7 @@ class MultibodyProblem:
         if model.r + model.s:
             B = np.vstack([terms["Phi_q"], terms["A"]])
             c = np.concatenate([np.zeros(model.r), terms["b"]])
-            qd -= B.T @ np.linalg.solve(B @ B.T, B @ qd + c)
+            qd -= np.linalg.lstsq(B, B @ qd + c, rcond=None)[0]
         return np.concatenate([q, qd])
 
 
