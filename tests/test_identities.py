@@ -11,8 +11,16 @@ import random
 import numpy as np
 import pytest
 import sympy as sp
+from conftest import (
+    MODEL_BUILDERS,
+    assert_numerically_equal,
+    derived,
+    evaluate,
+    random_values,
+    state_symbols,
+)
 
-from conftest import MODEL_BUILDERS, assert_numerically_equal, derived, evaluate, random_values, state_symbols
+from kronlag.calculus import time_derivative
 
 MODELS = list(MODEL_BUILDERS)
 
@@ -56,6 +64,18 @@ def test_body_by_body_velocity_terms_equal_C_qd(equations):
     """``eom.Cqd`` (summed body by body) is the product ``C qd`` of Eq. 22."""
     assert equations.Cqd.shape == (equations.M.rows, 1)
     assert_numerically_equal(equations.Cqd, equations.C * sp.Matrix(equations.speeds), state_symbols(equations))
+
+
+def test_gamma_is_theorem_1(equations):
+    """``Phi_q qdd = gamma`` with ``gamma = -(dPhi_q/dq (I ⊗ qd)) qd``, the literal Theorem 1."""
+    qd = sp.Matrix(equations.speeds)
+    if equations.Phi.rows:
+        expected = -time_derivative(equations.Phi_q, equations.coordinates, equations.speeds) * qd
+        assert_numerically_equal(equations.gamma, expected, state_symbols(equations))
+    if equations.A.rows:
+        rate = time_derivative(equations.A, equations.coordinates, equations.speeds) * qd
+        rate += time_derivative(equations.b, equations.coordinates, equations.speeds)
+        assert_numerically_equal(equations.gamma_nh, -rate, state_symbols(equations))
 
 
 def test_christoffel_form_makes_Md_minus_2C_skew_symmetric(equations):

@@ -189,28 +189,14 @@ class KernelSource:
 
     def _compute(self, name: str) -> list[list[se.Basic]]:
         eq = self.equations
-        if name in ("M", "C", "Cqd", "C_christoffel", "g", "Phi", "Phi_q", "A", "b", "f_Q"):
+        if name in ("M", "C", "Cqd", "C_christoffel", "g", "Phi", "Phi_q", "A", "b", "f_Q", "gamma", "gamma_nh"):
             return self.convert.matrix(getattr(eq, name))
         if name == "potential_energy":
             return [[self.convert(sp.sympify(eq.potential_energy))]]
         if name == "h":
             return [[f[0] - c[0] - g[0]] for f, c, g in
                     zip(self.matrix("f_Q"), self.matrix("Cqd"), self.matrix("g"))]
-        if name == "gamma":
-            return self._rate_times_speed(self.matrix("Phi_q"), None)
-        if name == "gamma_nh":
-            return self._rate_times_speed(self.matrix("A"), self.matrix("b"))
         raise KeyError(name)
-
-    def _rate_times_speed(self, jacobian: list[list[se.Basic]], offset) -> list[list[se.Basic]]:
-        """``-(dX/dt) qd - d(offset)/dt`` with ``dX/dt = sum_k dX/dq_k qd_k`` (Theorem 1)."""
-        rows = []
-        for i, row in enumerate(jacobian):
-            velocity = se.Add(*[entry * v for entry, v in zip(row, self.qd)])
-            if offset is not None:
-                velocity += offset[i][0]
-            rows.append([-se.Add(*[se.diff(velocity, q) * v for q, v in zip(self.q, self.qd)])])
-        return rows
 
     # -- kernels -------------------------------------------------------------------
 

@@ -131,6 +131,28 @@ class Equations:
         return sp.ImmutableMatrix(total)
 
     @cached_property
+    def gamma(self) -> sp.ImmutableMatrix:
+        """``gamma = -(d Phi_q/dt) qd``, shape (r, 1), so that ``Phi_q qdd = gamma``.
+
+        ``d Phi_q/dt = dPhi_q/dq (I ⊗ qd)`` (Theorem 1), evaluated as the sparse sum
+        ``sum_k dPhi_q/dq_k qd_k``.
+        """
+        return self._acceleration_offset(self.Phi_q, sp.zeros(self.Phi.rows, 1))
+
+    @cached_property
+    def gamma_nh(self) -> sp.ImmutableMatrix:
+        """``-(dA/dt) qd - db/dt``, shape (s, 1), so that ``A qdd = gamma_nh``."""
+        return self._acceleration_offset(self.A, self.b)
+
+    def _acceleration_offset(self, jacobian: sp.MatrixBase, offset: sp.MatrixBase) -> sp.ImmutableMatrix:
+        """``-d/dt (jacobian qd + offset)`` at fixed ``qd``, by Theorem 1."""
+        velocity = jacobian * sp.Matrix(self.speeds) + offset
+        rate = sp.zeros(*velocity.shape)
+        for q, qd in zip(self.coordinates, self.speeds):
+            rate += velocity.diff(q) * qd
+        return sp.ImmutableMatrix(-rate)
+
+    @cached_property
     def kinetic_energy(self) -> sp.Expr:
         """``T = 1/2 qd^T M qd``."""
         qd = sp.Matrix(self.speeds)

@@ -33,7 +33,6 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from .calculus import time_derivative
 from .equations import MATRIX_NAMES, Equations
 
 __all__ = ["LANGUAGES", "FORMATS", "export_code", "exported_matrices", "format_equations"]
@@ -146,11 +145,7 @@ LANGUAGES = tuple(_LANGUAGE_TABLE)
 
 def exported_matrices(eom: Equations) -> dict[str, sp.ImmutableMatrix]:
     """The matrices :func:`export_code` writes, by function name; ``gamma = -(d Phi_q/dt) qd``."""
-    qd = sp.Matrix(eom.speeds)
-    gamma = -time_derivative(eom.Phi_q, eom.coordinates, eom.speeds) * qd if eom.Phi.rows else sp.zeros(0, 1)
-    matrices = {name: getattr(eom, name) for name in EXPORTED if name != "gamma"}
-    matrices["gamma"] = sp.ImmutableMatrix(gamma)
-    return {name: matrices[name] for name in EXPORTED}
+    return {name: getattr(eom, name) for name in EXPORTED}
 
 
 def _parameter_order(eom: Equations, parameters) -> tuple[list[sp.Symbol], dict[sp.Symbol, sp.Expr]]:
