@@ -251,9 +251,10 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
     Returns
     -------
     Equations
-        ``M`` (m x m), ``C`` and ``C_christoffel`` (m x m), ``g`` (m x 1),
+        ``M`` (m x m), ``C`` (m x m), ``Cqd`` (``C qd``, m x 1), ``g`` (m x 1),
         ``Phi`` (r x 1), ``Phi_q`` (r x m), ``A`` (s x m), ``b`` (s x 1),
-        ``f_Q`` (m x 1), and ``dM_dq`` (m x m², on first access).
+        ``f_Q`` (m x 1); on first access ``C_christoffel`` (m x m), ``dM_dq``
+        (m x m²), ``Md``, ``gamma`` and ``gamma_nh``.
     """
     if not isinstance(system, System):
         raise TypeError(f"derive takes a kronlag.System, got {type(system).__name__}")
@@ -318,7 +319,7 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
     nonholonomic_offset = se.DenseMatrix(len(velocity_constraints), 1,
                                          [h.subs(zero_speeds) for h in velocity_constraints])
 
-    mass, mass_rate, second, velocity_terms = accumulator.matrices()
+    mass_matrix, mass_rate, second, velocity_terms = accumulator.matrices()
     coriolis = mass_rate - second / 2
 
     simplifier = _simplifier(simplify)
@@ -337,7 +338,7 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
     potential_expr = converter(potential)
     return Equations(
         system=system,
-        M=public(mass),
+        M=public(mass_matrix),
         C=public(coriolis),
         Cqd=public(velocity_terms, m, 1),
         christoffel_source=christoffel,
