@@ -55,6 +55,8 @@ import numpy as np
 import symengine as se
 import sympy as sp
 
+from .tolerances import RANK_RTOL, c_macros
+
 if TYPE_CHECKING:
     from .equations import Equations
 
@@ -65,18 +67,60 @@ __all__ = [
     "NumpyLibrary",
     "CLibrary",
     "ACCESSOR_KERNELS",
-    "RANK_RTOL",
-    "CHOLESKY_RTOL",
+    "LAYOUTS",
+    "layout",
+    "layout_macros",
     "c_compiler",
     "cache_directory",
 ]
 
-#: Relative tolerance of the rank decision on ``[Phi_q; A]``: a diagonal entry of R in the
-#: pivoted QR (C) or a singular value (NumPy) ``<= RANK_RTOL`` times the largest counts as zero.
-RANK_RTOL = 1e-10
-#: A Cholesky pivot ``<= CHOLESKY_RTOL * max(diag)`` of ``Z^T M Z`` means M is not
-#: positive definite on the constraint null space (a singular configuration).
-CHOLESKY_RTOL = 1e-12
+#: The blocks of the kernels read by the C solvers and integrators, in output order:
+#: ``(name, rows, columns)`` with the dimensions named ``"m"``, ``"r"``, ``"s"`` or 1.  Both the
+#: Python side (:func:`layout`, ``NumericModel.dynamics_terms``) and the C side (offset macros
+#: ``KRONLAG_<KERNEL>_<BLOCK>``, :func:`layout_macros`) derive their offsets from this table.
+#:
+#: ``"dynamics"``: ``h = f_Q - C qd - g``, ``gamma = -(dPhi_q/dt) qd``, ``gamma_nh = -(dA/dt) qd - db/dt``.
+#: ``"tangent"``: the derivatives of the dynamic residual
+#: ``e = M a + C qd + g - f_Q + Phi_q^T nu + A^T mu`` at given accelerations ``a`` and
+#: multipliers ``nu``, ``mu`` (inputs appended to ``p``): ``K = de/dq`` (stiffness, including
+#: the multiplier term ``d(Phi_q^T nu)/dq``) and ``D = de/dqd`` (damping and gyroscopic terms).
+LAYOUTS: dict[str, tuple[tuple[str, str, str | int], ...]] = {
+    "dynamics": (("M", "m", "m"), ("h", "m", 1), ("Phi", "r", 1), ("Phi_q", "r", "m"), ("gamma", "r", 1),
+                 ("A", "s", "m"), ("b", "s", 1), ("gamma_nh", "s", 1)),
+    "tangent": (("K", "m", "m"), ("D", "m", "m")),
+}
+
+
+def layout(kernel: str, m: int, r: int, s: int) -> tuple[tuple[str, int, tuple[int, ...]], ...]:
+    """``(block, offset, shape)`` of every block of ``kernel`` (see :data:`LAYOUTS`); vectors have
+    shape ``(n,)``, matrices ``(rows, columns)``."""
+    dimensions = {"m": m, "r": r, "s": s, 1: 1}
+    result, offset = [], 0
+    for name, rows, columns in LAYOUTS[kernel]:
+        shape = (dimensions[rows],) if columns == 1 else (dimensions[rows], dimensions[columns])
+        result.append((name, offset, shape))
+        offset += math.prod(shape)
+    return tuple(result)
+
+
+def layout_macros(kernel: str, m: int, r: int, s: int) -> str:
+    """``#define KRONLAG_<KERNEL>_<BLOCK> offset`` for every block and ``KRONLAG_<KERNEL>_SIZE``."""
+    blocks = layout(kernel, m, r, s)
+    prefix = f"KRONLAG_{kernel.upper()}"
+    lines = [f"#define {prefix}_{name.upper()} {offset}" for name, offset, _ in blocks]
+    name, offset, shape = blocks[-1]
+    lines.append(f"#define {prefix}_SIZE {offset + math.prod(shape)}")
+    return "\n".join(lines) + "\n"
+
+
+#: C sources shipped with kronlag (``src/kronlag/c``), appended to the generated kernels.
+C_DIRECTORY = Path(__file__).with_name("c")
+
+
+def c_file(name: str) -> str:
+    """The text of ``src/kronlag/c/<name>``."""
+    return (C_DIRECTORY / name).read_text()
+
 
 #: Kernels that evaluate one public matrix each (``NumericModel.M`` etc.), compiled together.
 #: ``"C"``, ``"Cqd"`` and ``"C_christoffel"`` are kernels too, each compiled alone on first use:
@@ -158,9 +202,9 @@ class _SymengineConverter:
 class KernelSource:
     """The expressions of an :class:`Equations` object, prepared for code generation.
 
-    Shared by both backends.  :meth:`kernel` returns a :class:`Kernel` for
-    ``"dynamics"``, one of :data:`ACCESSOR_KERNELS`, ``"C"``, ``"Cqd"`` (``C qd``)
-    or ``"C_christoffel"``.
+    Shared by both backends.  :meth:`kernel` returns a :class:`Kernel` for a
+    kernel of :data:`LAYOUTS` (``"dynamics"``, ``"tangent"``), one of
+    :data:`ACCESSOR_KERNELS`, ``"C"``, ``"Cqd"`` (``C qd``) or ``"C_christoffel"``.
 
     Parameters
     ----------
@@ -196,13 +240,28 @@ class KernelSource:
         if name == "h":
             return [[f[0] - c[0] - g[0]] for f, c, g in
                     zip(self.matrix("f_Q"), self.matrix("Cqd"), self.matrix("g"))]
+        if name in ("K", "D"):
+            variables = self.q if name == "K" else self.qd
+            return [[se.diff(entry, variable) for variable in variables] for entry in self._dynamic_residual()]
         raise KeyError(name)
+
+    def _dynamic_residual(self) -> list[se.Basic]:
+        """``e = M a + C qd + g - f_Q + Phi_q^T nu + A^T mu`` with the accelerations ``a`` and the
+        multipliers ``nu``, ``mu`` read from ``p`` after the parameters: ``p[P + i]`` is ``a_i``,
+        ``p[P + m + j]`` is ``nu_j``, ``p[P + m + r + k]`` is ``mu_k`` (the "tangent" kernel)."""
+        m, r, s = self.equations.shape
+        extra = [se.Symbol(f"p[{len(self.equations.parameters) + i}]") for i in range(m + r + s)]
+        a, nu, mu = extra[:m], extra[m:m + r], extra[m + r:]
+        M, h, Phi_q, A = (self.matrix(name) for name in ("M", "h", "Phi_q", "A"))
+        return [se.Add(*(M[i][j] * a[j] for j in range(m)), -h[i][0],
+                       *(Phi_q[k][i] * nu[k] for k in range(r)), *(A[k][i] * mu[k] for k in range(s)))
+                for i in range(m)]
 
     # -- kernels -------------------------------------------------------------------
 
     def kernel(self, name: str) -> Kernel:
         """The kernel ``name`` with common subexpressions eliminated (``symengine.cse``)."""
-        names = ("M", "h", "Phi", "Phi_q", "gamma", "A", "b", "gamma_nh") if name == "dynamics" else (name,)
+        names = tuple(block for block, _, _ in LAYOUTS[name]) if name in LAYOUTS else (name,)
         matrices = [self.matrix(block) for block in names]
         blocks = tuple(Block(block, (len(rows), len(rows[0]) if rows else self._columns(block)))
                        for block, rows in zip(names, matrices))
@@ -211,7 +270,7 @@ class KernelSource:
         return Kernel(name, blocks, tuple(temporaries), tuple(outputs))
 
     def _columns(self, name: str) -> int:
-        return self.m if name in ("M", "C", "C_christoffel", "Phi_q", "A") else 1
+        return self.m if name in ("M", "C", "C_christoffel", "Phi_q", "A", "K", "D") else 1
 
 
 # -- NumPy backend -----------------------------------------------------------------------
@@ -330,195 +389,23 @@ def c_kernel(kernel: Kernel, first_chunk: int) -> tuple[str, int]:
     return "\n".join(lines) + "\n", len(names)
 
 
-#: The solver of the augmented system, appended to the C source of the dynamics
-#: kernel (``KRONLAG_M``, ``KRONLAG_R``, ``KRONLAG_S`` defined before it).
-#: Null-space method with a rank-revealing QR; see :func:`kronlag.numeric.solve_augmented`
-#: for the algorithm (the NumPy backend's twin of ``kronlag_solve``).
-C_SOLVER = r"""
-#define KRONLAG_K (KRONLAG_R + KRONLAG_S)
-#define KRONLAG_TERMS (KRONLAG_M * KRONLAG_M + KRONLAG_M + 2 * KRONLAG_R + (KRONLAG_R + KRONLAG_S) * KRONLAG_M \
-                       + 2 * KRONLAG_S + 1)
-
-/* Householder QR of the rows x cols matrix a (row-major, leading dimension lda), in place:
- * R in the upper triangle, reflector j (v_j[j] = 1) below the diagonal of column j, tau[j].
- * With perm != NULL, column pivoting by the largest remaining norm (a P = Q R). */
-static void house_qr(double *a, int rows, int cols, int lda, int *perm, double *tau)
-{
-    int steps = rows < cols ? rows : cols;
-    if (perm)
-        for (int j = 0; j < cols; ++j) perm[j] = j;
-    for (int j = 0; j < steps; ++j) {
-        if (perm) {
-            int best = j; double best_norm = -1.0;
-            for (int c = j; c < cols; ++c) {
-                double norm = 0.0;
-                for (int i = j; i < rows; ++i) norm += a[i * lda + c] * a[i * lda + c];
-                if (norm > best_norm) { best_norm = norm; best = c; }
-            }
-            if (best != j) {
-                for (int i = 0; i < rows; ++i) {
-                    double swap = a[i * lda + j]; a[i * lda + j] = a[i * lda + best]; a[i * lda + best] = swap;
-                }
-                int swap = perm[j]; perm[j] = perm[best]; perm[best] = swap;
-            }
-        }
-        double alpha = a[j * lda + j], xnorm = 0.0;
-        for (int i = j + 1; i < rows; ++i) xnorm += a[i * lda + j] * a[i * lda + j];
-        if (xnorm == 0.0) { tau[j] = 0.0; continue; }
-        double beta = -copysign(sqrt(alpha * alpha + xnorm), alpha);
-        tau[j] = (beta - alpha) / beta;
-        for (int i = j + 1; i < rows; ++i) a[i * lda + j] /= alpha - beta;
-        a[j * lda + j] = beta;
-        for (int c = j + 1; c < cols; ++c) {
-            double w = a[j * lda + c];
-            for (int i = j + 1; i < rows; ++i) w += a[i * lda + j] * a[i * lda + c];
-            w *= tau[j];
-            a[j * lda + c] -= w;
-            for (int i = j + 1; i < rows; ++i) a[i * lda + c] -= w * a[i * lda + j];
-        }
-    }
-}
-
-/* x <- H_j x for the reflector stored in column j of a (rows x ., leading dimension lda). */
-static void house_apply(const double *a, int rows, int lda, int j, double tau, double *x, int stride)
-{
-    if (tau == 0.0) return;
-    double w = x[j * stride];
-    for (int i = j + 1; i < rows; ++i) w += a[i * lda + j] * x[i * stride];
-    w *= tau;
-    x[j * stride] -= w;
-    for (int i = j + 1; i < rows; ++i) x[i * stride] -= w * a[i * lda + j];
-}
-
-/* Solve [[M, G^T], [G, 0]] [qdd; nu] = [h; c] with G = [Phi_q; A] (K x m), rank-revealing.
- * terms: the output of kronlag_dynamics (M, h, Phi, Phi_q, gamma, A, b, gamma_nh).
- * Returns 0, or 1 when M is not positive definite on the null space of G. */
-static int kronlag_solve(const double *terms, const double *qd, double alpha, double beta,
-                         double *qdd, double *nu, int *rank)
-{
-    enum { m = KRONLAG_M, r = KRONLAG_R, s = KRONLAG_S, k = KRONLAG_K };
-    const double *M = terms, *h = terms + m * m, *Phi = h + m, *Phi_q = Phi + r, *gamma = Phi_q + r * m;
-    const double *A = gamma + r, *b = A + s * m, *gamma_nh = b + s;
-    double X[m * (k + 1)], tau[k + 1], c[k + 1], B[m * m], y[m];
-    int perm[k + 1];
-    /* X = G^T (m x k), c = [gamma - 2 alpha Phi_q qd - beta^2 Phi; gamma_nh - alpha (A qd + b)] */
-    for (int j = 0; j < k; ++j) {
-        const double *row = j < r ? Phi_q + j * m : A + (j - r) * m;
-        double velocity = 0.0;
-        for (int i = 0; i < m; ++i) { X[i * k + j] = row[i]; velocity += row[i] * qd[i]; }
-        c[j] = j < r ? gamma[j] - 2.0 * alpha * velocity - beta * beta * Phi[j]
-                     : gamma_nh[j - r] - alpha * (velocity + b[j - r]);
-    }
-    house_qr(X, m, k, k, perm, tau);
-    int rho = 0;
-    int steps = m < k ? m : k;
-    while (rho < steps && fabs(X[rho * k + rho]) > KRONLAG_RANK_RTOL * fabs(X[0])) ++rho;
-    *rank = rho;
-    /* B = Q^T M Q, y = Q^T h with Q = H_0 ... H_{rho-1}; Z = Q[:, rho:] spans the null space of G. */
-    memcpy(B, M, sizeof B);
-    memcpy(y, h, sizeof y);
-    for (int j = 0; j < rho; ++j) {
-        for (int col = 0; col < m; ++col) house_apply(X, m, k, j, tau[j], B + col, m);
-        for (int row = 0; row < m; ++row) house_apply(X, m, k, j, tau[j], B + row * m, 1);
-        house_apply(X, m, k, j, tau[j], y, 1);
-    }
-    /* R1^T = W T (second QR, K x rho), so that G = P R1^T Q1^T. Constraint part y1 = Q1^T qdd:
-     * T y1 = W^T P^T c (least squares when redundant rows are inconsistent). */
-    double W[(k + 1) * (k + 1)], wtau[k + 1], cp[k + 1];
-    for (int i = 0; i < k; ++i) {
-        cp[i] = c[perm[i]];
-        for (int j = 0; j < rho; ++j) W[i * k + j] = i >= j ? X[j * k + i] : 0.0;
-    }
-    house_qr(W, k, rho, k, NULL, wtau);
-    for (int j = 0; j < rho; ++j) house_apply(W, k, k, j, wtau[j], cp, 1);
-    double qt[m];
-    for (int i = rho - 1; i >= 0; --i) {
-        double sum = cp[i];
-        for (int j = i + 1; j < rho; ++j) sum -= W[i * k + j] * qt[j];
-        qt[i] = sum / W[i * k + i];
-    }
-    /* Null-space part y2: (Z^T M Z) y2 = Z^T h - Z^T M Q1 y1, Cholesky (fails if singular). */
-    int n = m - rho;
-    double L[m * m], z[m];
-    double largest = 0.0;
-    for (int i = 0; i < n; ++i) if (B[(rho + i) * m + rho + i] > largest) largest = B[(rho + i) * m + rho + i];
-    for (int i = 0; i < n; ++i) {
-        double sum = y[rho + i];
-        for (int j = 0; j < rho; ++j) sum -= B[(rho + i) * m + j] * qt[j];
-        z[i] = sum;
-        for (int j = 0; j <= i; ++j) {
-            double entry = B[(rho + i) * m + rho + j];
-            for (int l = 0; l < j; ++l) entry -= L[i * m + l] * L[j * m + l];
-            if (i == j) {
-                if (!(entry > KRONLAG_CHOLESKY_RTOL * largest)) return 1;
-                L[i * m + i] = sqrt(entry);
-            } else {
-                L[i * m + j] = entry / L[j * m + j];
-            }
-        }
-    }
-    for (int i = 0; i < n; ++i) {
-        for (int l = 0; l < i; ++l) z[i] -= L[i * m + l] * z[l];
-        z[i] /= L[i * m + i];
-    }
-    for (int i = n - 1; i >= 0; --i) {
-        for (int l = i + 1; l < n; ++l) z[i] -= L[l * m + i] * z[l];
-        z[i] /= L[i * m + i];
-    }
-    for (int i = 0; i < n; ++i) qt[rho + i] = z[i];
-    /* Multipliers, minimum norm: R1 P^T nu = Q1^T (h - M qdd) = y1 - B[:rho, :] qt,
-     * R1 = T^T W^T, so P^T nu = W T^{-T} (Q1^T (h - M qdd)). */
-    double a[k + 1];
-    for (int i = 0; i < rho; ++i) {
-        double sum = y[i];
-        for (int j = 0; j < m; ++j) sum -= B[i * m + j] * qt[j];
-        for (int j = 0; j < i; ++j) sum -= W[j * k + i] * a[j];
-        a[i] = sum / W[i * k + i];
-    }
-    for (int i = rho; i < k; ++i) a[i] = 0.0;
-    for (int j = rho - 1; j >= 0; --j) house_apply(W, k, k, j, wtau[j], a, 1);
-    for (int i = 0; i < k; ++i) nu[perm[i]] = a[i];
-    /* qdd = Q qt */
-    for (int j = rho - 1; j >= 0; --j) house_apply(X, m, k, j, tau[j], qt, 1);
-    memcpy(qdd, qt, sizeof qt);
-    return 0;
-}
-
-/* Forward dynamics with multipliers (Baumgarte alpha, beta); 0 on success, 1 if singular. */
-int kronlag_forward_dynamics(double t, const double *q, const double *qd, const double *p,
-                             double alpha, double beta, double *qdd, double *lam, double *mu)
-{
-    double terms[KRONLAG_TERMS], nu[KRONLAG_K + 1];
-    int rank;
-    kronlag_dynamics(t, q, qd, p, terms);
-    int status = kronlag_solve(terms, qd, alpha, beta, qdd, nu, &rank);
-    for (int j = 0; j < KRONLAG_R; ++j) lam[j] = nu[j];
-    for (int j = 0; j < KRONLAG_S; ++j) mu[j] = nu[KRONLAG_R + j];
-    return status;
-}
-
-/* Entry point for Python: in = [t, alpha, beta, q (m), qd (m), p (P)], out = [qdd (m), lambda (r), mu (s)];
- * returns the rank of [Phi_q; A], or -1 when the configuration is singular. */
-int kronlag_forward_dynamics_packed(const double *in, double *out)
-{
-    double terms[KRONLAG_TERMS];
-    int rank;
-    const double *q = in + 3, *qd = q + KRONLAG_M;
-    kronlag_dynamics(in[0], q, qd, qd + KRONLAG_M, terms);
-    return kronlag_solve(terms, qd, in[1], in[2], out, out + KRONLAG_M, &rank) ? -1 : rank;
-}
-"""
+def solver_header(m: int, r: int, s: int, rank_rtol: float) -> str:
+    """The macros the C solvers and integrators read: dimensions, block offsets
+    (:func:`layout_macros`) and the numerical policy (:func:`kronlag.tolerances.c_macros`)."""
+    return (f"#define KRONLAG_M {m}\n#define KRONLAG_R {r}\n#define KRONLAG_S {s}\n#define KRONLAG_K {r + s}\n"
+            + layout_macros("dynamics", m, r, s) + layout_macros("tangent", m, r, s) + c_macros(rank_rtol))
 
 
 class CLibrary:
     """Kernels compiled with the C compiler into a shared library, loaded with :mod:`ctypes`.
 
     With ``solver=True`` the library also holds ``kronlag_forward_dynamics``
-    (needs a ``"dynamics"`` kernel).  ``evaluate(name, t, q, qd, p)`` returns the
-    flat float64 output of kernel ``name``.
+    (needs a ``"dynamics"`` kernel; ``src/kronlag/c/linalg.c`` and ``augmented.c``),
+    which decides ranks with ``rank_rtol`` (:mod:`kronlag.tolerances`).
+    ``evaluate(name, t, q, qd, p)`` returns the flat float64 output of kernel ``name``.
     """
 
-    def __init__(self, kernels: Sequence[Kernel], *, solver: bool = False):
+    def __init__(self, kernels: Sequence[Kernel], *, solver: bool = False, rank_rtol: float = RANK_RTOL):
         self.kernels = {kernel.name: kernel for kernel in kernels}
         parts, chunks = [_C_PREAMBLE], 1
         for kernel in kernels:
@@ -528,10 +415,8 @@ class CLibrary:
         if solver:
             dynamics = self.kernels["dynamics"]
             m, r, s = (dynamics.blocks[i].shape[0] for i in (0, 2, 6))
-            parts.append(f"#if KRONLAG_IN_PART(0)\n#define KRONLAG_M {m}\n#define KRONLAG_R {r}\n"
-                         f"#define KRONLAG_S {s}\n"
-                         f"#define KRONLAG_RANK_RTOL {RANK_RTOL!r}\n#define KRONLAG_CHOLESKY_RTOL {CHOLESKY_RTOL!r}\n")
-            parts.append(C_SOLVER + "#endif\n")
+            parts.append("#if KRONLAG_IN_PART(0)\n" + solver_header(m, r, s, rank_rtol))
+            parts.append(c_file("linalg.c") + c_file("augmented.c") + "#endif\n")
         self.source = "\n".join(parts)
         self.path = compile_shared_library(self.source, parts=min(chunks, os.cpu_count() or 1, 8))
         self.library = ctypes.CDLL(str(self.path))

@@ -196,7 +196,7 @@ class Equations:
 
     # -- numerics ---------------------------------------------------------------
 
-    def numeric(self, parameters: dict, *, backend: str = "auto"):
+    def numeric(self, parameters: dict, *, backend: str = "auto", rank_rtol: float | None = None):
         """Generate and compile the numeric model (:class:`kronlag.numeric.NumericModel`).
 
         Parameters
@@ -206,10 +206,15 @@ class Equations:
             callable ``f(t)`` for a time-varying one (e.g. a torque).
         backend : {"auto", "numpy", "c"}
             ``"auto"``: ``"c"`` when a C compiler is available, else ``"numpy"``.
+        rank_rtol : float, optional
+            Relative rank tolerance on ``[Phi_q; A]`` for every rank decision of the
+            model (default :data:`kronlag.tolerances.RANK_RTOL`).
         """
         from .numeric import NumericModel
+        from .tolerances import RANK_RTOL
 
-        return NumericModel(self, parameters, backend=backend)
+        return NumericModel(self, parameters, backend=backend,
+                            rank_rtol=RANK_RTOL if rank_rtol is None else rank_rtol)
 
     # -- printing ---------------------------------------------------------------
 

@@ -27,6 +27,7 @@ import numpy as np
 import sympy as sp
 
 from . import codegen
+from .tolerances import CHOLESKY_RTOL, RANK_RTOL, check_rank_rtol, numerical_rank
 
 if TYPE_CHECKING:
     from .equations import Equations
@@ -111,13 +112,13 @@ class InverseDynamicsResult:
     unique: bool
 
 
-def solve_augmented(M: np.ndarray, h: np.ndarray, G: np.ndarray, c: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray, int] | None:
+def solve_augmented(M: np.ndarray, h: np.ndarray, G: np.ndarray, c: np.ndarray, *,
+                    rank_rtol: float = RANK_RTOL) -> tuple[np.ndarray, np.ndarray, int] | None:
     """Solve ``[[M, G^T], [G, 0]] [qdd; nu] = [h; c]`` by the null-space method.
 
     ``G = [Phi_q; A]`` (k, m) may be rank deficient.  With the SVD
     ``G = U1 S1 V1^T`` of numerical rank ``rho`` (``S1``: the singular values
-    above ``RANK_RTOL`` times the largest) and ``Z`` (m, m - rho) completing
+    above ``rank_rtol`` times the largest, :func:`kronlag.tolerances.numerical_rank`) and ``Z`` (m, m - rho) completing
     ``V1`` to an orthogonal ``V = [V1, Z]`` (``Z`` spans the null space of ``G``),
     ``qdd = V1 y1 + Z y2`` with::
 
@@ -125,7 +126,7 @@ def solve_augmented(M: np.ndarray, h: np.ndarray, G: np.ndarray, c: np.ndarray
         (Z^T M Z) y2 = Z^T h - Z^T M V1 y1               (Cholesky)
         nu = U1 S1^{-1} V1^T (h - M qdd)                 (minimum-norm multipliers)
 
-    The C backend (``kronlag_solve`` in :data:`kronlag.codegen.C_SOLVER`) does
+    The C backend (``kronlag_solve`` in ``src/kronlag/c/augmented.c``) does
     the same with a column-pivoted QR in place of the SVD.
 
     Parameters
@@ -143,7 +144,7 @@ def solve_augmented(M: np.ndarray, h: np.ndarray, G: np.ndarray, c: np.ndarray
     m, k = len(h), len(c)
     if k:
         U, S, Vt = np.linalg.svd(G)
-        rank = int(np.count_nonzero(S > codegen.RANK_RTOL * S[0])) if S[0] > 0 else 0
+        rank = numerical_rank(S, rank_rtol)
         U1, S1, V = U[:, :rank], S[:rank], Vt.T
     else:
         U1, S1, V, rank = np.zeros((0, 0)), np.zeros(0), np.eye(m), 0
@@ -157,7 +158,7 @@ def solve_augmented(M: np.ndarray, h: np.ndarray, G: np.ndarray, c: np.ndarray
             L = np.linalg.cholesky(B22)
         except np.linalg.LinAlgError:
             return None
-        if not np.all(np.diag(L) ** 2 > codegen.CHOLESKY_RTOL * np.max(np.diag(B22))):
+        if not np.all(np.diag(L) ** 2 > CHOLESKY_RTOL * np.max(np.diag(B22))):
             return None
         y2 = np.linalg.solve(B22, y[rank:] - B[rank:, :rank] @ y1)
     qt = np.concatenate([y1, y2])
@@ -189,6 +190,9 @@ class NumericModel:
         Value (float or callable of ``t``) of every parameter, keyed by name or symbol.
     backend : {"auto", "numpy", "c"}
         ``"auto"`` is ``"c"`` when a C compiler is available, else ``"numpy"``.
+    rank_rtol : float
+        Relative rank tolerance on ``[Phi_q; A]`` shared by forward dynamics, the
+        projections, :meth:`assemble` and the integrators (see :mod:`kronlag.tolerances`).
 
     Notes
     -----
@@ -199,13 +203,15 @@ class NumericModel:
     only under a lock.
     """
 
-    def __init__(self, equations: Equations, parameters: Mapping, *, backend: str = "auto"):
+    def __init__(self, equations: Equations, parameters: Mapping, *, backend: str = "auto",
+                 rank_rtol: float = RANK_RTOL):
         if backend not in ("auto", "numpy", "c"):
             raise ValueError(f"backend must be 'auto', 'numpy' or 'c', got {backend!r}")
         if backend == "auto":
             backend = "c" if codegen.c_compiler() else "numpy"
         self.equations = equations
         self.backend = backend
+        self.rank_rtol = check_rank_rtol(rank_rtol)
         self.m, self.r, self.s = equations.shape
         self.coordinate_names = tuple(q.name for q in equations.coordinates)
         self._coordinate_index = {name: i for i, name in enumerate(self.coordinate_names)}
@@ -214,13 +220,10 @@ class NumericModel:
         self.time_varying = bool(self._time_varying)
         self._source = codegen.KernelSource(equations)
         self._libraries: dict[str, codegen.NumpyLibrary | codegen.CLibrary] = {}
+        self._c_kernels: dict[str, str] = {}
         self._dynamics = self._library("dynamics")
-        self._terms_layout = []
-        start = 0
-        for block in self._dynamics.kernels["dynamics"].blocks:
-            shape = block.shape if block.name in ("M", "Phi_q", "A") else (block.size,)
-            self._terms_layout.append((block.name, start, start + block.size, shape))
-            start += block.size
+        self._terms_layout = [(name, offset, offset + int(np.prod(shape)), shape)
+                              for name, offset, shape in codegen.layout("dynamics", self.m, self.r, self.s)]
         self._warned_redundant = False
         if backend == "c":
             self._fd_in = np.concatenate([np.zeros(3 + 2 * self.m), self._p])
@@ -270,7 +273,7 @@ class NumericModel:
             names = codegen.ACCESSOR_KERNELS if group == "accessors" else (group,)
             kernels = [self._source.kernel(name) for name in names]
             if self.backend == "c":
-                library = codegen.CLibrary(kernels, solver=group == "dynamics")
+                library = codegen.CLibrary(kernels, solver=group == "dynamics", rank_rtol=self.rank_rtol)
             else:
                 library = codegen.NumpyLibrary(kernels)
             self._libraries[group] = library
@@ -282,6 +285,19 @@ class NumericModel:
         if self.backend != "c":
             raise AttributeError("c_source exists only for backend='c'")
         return self._dynamics.source
+
+    def c_kernels(self, *names: str) -> str:
+        """C source of the kernels ``names`` (e.g. ``"tangent"``, ``"potential_energy"``), to be
+        appended to :attr:`c_source` by the compiled integrators (C backend only)."""
+        for name in names:
+            if name not in self._c_kernels:
+                self._c_kernels[name] = codegen.c_kernel(self._source.kernel(name), 1)[0]
+        return "".join(self._c_kernels[name] for name in names)
+
+    @property
+    def constraint_names(self) -> tuple[str, ...]:
+        """Names of the holonomic constraints, in the order of ``Phi`` (length r)."""
+        return tuple(constraint.name for constraint in self.equations.system.constraints)
 
     def _evaluate(self, name: str, q, qd, t: float) -> np.ndarray:
         q = self._vector(q, "q")
@@ -409,7 +425,7 @@ class NumericModel:
             G = np.vstack([terms["Phi_q"], terms["A"]])
             c = np.concatenate([terms["gamma"] - 2 * alpha * terms["Phi_q"] @ qd - beta ** 2 * terms["Phi"],
                                 terms["gamma_nh"] - alpha * (terms["A"] @ qd + terms["b"])])
-            solution = solve_augmented(terms["M"], terms["h"], G, c)
+            solution = solve_augmented(terms["M"], terms["h"], G, c, rank_rtol=self.rank_rtol)
             if solution is None:
                 raise SingularConfigurationError(q, qd, t)
             qdd, nu, rank = solution

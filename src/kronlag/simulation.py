@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import ctypes
 import time
+import weakref
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from contextlib import suppress
@@ -28,7 +29,8 @@ from scipy.integrate import DOP853
 
 from . import codegen
 from .numeric import SingularConfigurationError
-from .trajectory import Trajectory
+from .tolerances import numerical_rank
+from .trajectory import SingularPassage, Trajectory
 
 if TYPE_CHECKING:
     from .numeric import NumericModel
@@ -162,8 +164,10 @@ class Solution:
         Right-hand-side or residual evaluations, Jacobian evaluations, accepted steps.
     derived : dict or None
         ``qdd`` (N, m), ``lam`` (N, r), ``mu`` (N, s), ``kinetic_energy`` (N,),
-        ``position_residual`` (N, r), ``velocity_residual`` (N, r + s) at the
-        outputs, when the solver computed them (else :func:`simulate` does).
+        ``potential_energy`` (N,), ``position_residual`` (N, r), ``velocity_residual``
+        (N, r + s) at the outputs, when the solver computed them (else :func:`simulate` does).
+    events : tuple of SingularPassage
+        Singular configurations passed.
     """
 
     t: np.ndarray
@@ -174,6 +178,7 @@ class Solution:
     njev: int
     steps: int
     derived: dict[str, np.ndarray] | None = None
+    events: tuple[SingularPassage, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -195,13 +200,21 @@ class SolverOptions:
 class Solver(ABC):
     """A time-integration method for a :class:`MultibodyProblem`.
 
-    Subclasses declare ``name``, ``formulation`` (the equations integrated) and
-    ``order`` and implement :meth:`solve`.
+    Subclasses declare ``name``, ``formulation`` (the equations integrated),
+    ``order`` and, where they need more than any model, ``requirements`` and
+    :meth:`supports`, and implement :meth:`solve`.
     """
 
     name: ClassVar[str]
     formulation: ClassVar[str]
     order: ClassVar[str]
+    #: What a model needs for this method (said when :meth:`supports` is False).
+    requirements: ClassVar[str] = "nothing"
+
+    @staticmethod
+    def supports(model: NumericModel) -> bool:
+        """Whether the method can integrate ``model``."""
+        return True
 
     def __init__(self, options: SolverOptions):
         self.options = options
@@ -457,11 +470,13 @@ class GGLSolver(Solver):
         return _march(lambda: _IDAStepper(problem, self.options), problem, self.options)
 
 
-# -- compiled path: SUNDIALS CVODE in C -----------------------------------------------------------
+# -- compiled methods: CVODE, ALI3-P and the switch between them, in C ------------------------------
 
-_DRIVER = Path(__file__).with_name("_cvode_driver.c")
 _SUNDIALS_LIBRARIES = ("sundials_core", "sundials_nvecserial", "sundials_sunmatrixdense",
                        "sundials_sunlinsoldense", "sundials_cvode")
+_PROGRESS = ctypes.CFUNCTYPE(None, ctypes.c_double)
+#: Most singular passages stored per run segment (more are counted).
+_MAX_EVENTS = 1000
 
 
 def _load_sundials() -> None:
@@ -478,40 +493,215 @@ def _load_sundials() -> None:
 
 
 @lru_cache(maxsize=None)
-def _cvode_library(model_source: str) -> ctypes.CDLL:
-    """``model_source`` + the CVODE driver, compiled once (cached on disk by
-    :func:`codegen.compile_shared_library`, keyed by a hash of the source) and loaded."""
-    _load_sundials()
-    target = codegen.compile_shared_library(model_source + "\n" + _DRIVER.read_text())
-    library = ctypes.CDLL(str(target))
-    pointer, c_double = ctypes.c_void_p, ctypes.c_double
-    library.kronlag_cvode.argtypes = [pointer, c_double, c_double, pointer, ctypes.c_int, pointer,
-                                      c_double, c_double, c_double, c_double, c_double, ctypes.c_long,
-                                      pointer, pointer, pointer, pointer, _PROGRESS]
-    library.kronlag_cvode.restype = ctypes.c_int
-    library.kronlag_outputs.argtypes = [pointer, ctypes.c_int] + [pointer] * 8
-    library.kronlag_outputs.restype = None
-    library.kronlag_cvode_flag_name.argtypes = [ctypes.c_int]
-    library.kronlag_cvode_flag_name.restype = ctypes.c_char_p
-    return library
+def _driver_library(source: str) -> ctypes.CDLL:
+    """``source`` (a model's C source with kernels and a driver appended) compiled once (cached on
+    disk by :func:`codegen.compile_shared_library`, keyed by a hash of the source) and loaded."""
+    return ctypes.CDLL(str(codegen.compile_shared_library(source)))
 
 
-_PROGRESS = ctypes.CFUNCTYPE(None, ctypes.c_double)
+#: The drivers of the compiled methods: the kernels each appends to ``model.c_source`` (after the
+#: monitor), its C file, its entry point and the argument types of the entry point.
+_P, _D, _I, _L = ctypes.c_void_p, ctypes.c_double, ctypes.c_int, ctypes.c_long
+_DRIVERS = {
+    "cvode": (("potential_energy",), "cvode.c", "kronlag_cvode",
+              [_P, _D, _D, _P, _I, _P, _D, _D, _D, _D, _D, _L, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _PROGRESS]),
+    "index3": (("tangent", "potential_energy"), "index3.c", "kronlag_index3",
+               [_P, _I, _D, _D, _P, _P, _P, _I, _P, _D, _D, _D, _D, _L, _I, _I] + [_P] * 10
+               + [_I, _P, _P, _P, _PROGRESS]),
+}
+#: Loaded driver libraries per model (a model's are built once, on first use).
+_LOADED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _driver(model: NumericModel, kind: str) -> ctypes.CDLL:
+    """The shared library of ``model`` with the driver ``kind`` of :data:`_DRIVERS`."""
+    libraries = _LOADED.setdefault(model, {})
+    if kind not in libraries:
+        kernels, file, entry, argtypes = _DRIVERS[kind]
+        if kind == "cvode":
+            _load_sundials()
+        library = _driver_library(model.c_source + model.c_kernels(*kernels) + codegen.c_file("monitor.c")
+                                  + codegen.c_file(file))
+        function = getattr(library, entry)
+        function.argtypes, function.restype = argtypes, ctypes.c_int
+        if kind == "cvode":
+            library.kronlag_outputs.argtypes = [_P, _I] + [_P] * 9
+            library.kronlag_outputs.restype = None
+            library.kronlag_cvode_flag_name.argtypes = [_I]
+            library.kronlag_cvode_flag_name.restype = ctypes.c_char_p
+        libraries[kind] = library
+    return libraries[kind]
+
+
+def _passage(model: NumericModel, record: np.ndarray) -> SingularPassage:
+    """A :class:`SingularPassage` from a record ``[t_enter, t_exit, t, ratio, row, q (m)]`` of
+    ``src/kronlag/c/monitor.c``; the constraints involved are read off the left singular vector of
+    ``Phi_q`` that belongs to the singular value that (nearly) vanished, the one at the start's rank."""
+    t_enter, t_exit, t, ratio, row = record[:5]
+    q = np.array(record[5:5 + model.m])
+    names = model.constraint_names
+    U, S, _ = np.linalg.svd(model.Phi_q(q, t))
+    # the smallest singular value above the rank tolerance is the one that (nearly) vanishes
+    direction = np.abs(U[:, max(numerical_rank(S, model.rank_rtol), 1) - 1])
+    involved = tuple(names[i] for i in np.flatnonzero(direction >= 0.1 * direction.max()))
+    return SingularPassage(t=float(t), t_enter=float(t_enter), t_exit=float(t_exit), q=q, ratio=float(ratio),
+                           constraints=involved or (names[int(row)],))
+
+
+@dataclass(eq=False)
+class _Segment:
+    """What one call of a compiled driver produced: outputs, counters, events and where it ended
+    (``flag``: 0 at ``t1``, positive for a hand-over, negative for a failure)."""
+
+    t: np.ndarray
+    y: np.ndarray
+    derived: dict[str, np.ndarray]
+    events: tuple[SingularPassage, ...]
+    flag: int
+    t_end: float
+    y_end: np.ndarray
+    steps: int
+    nfev: int
+    njev: int
+
+    def without_first_row(self) -> _Segment:
+        """The segment without its first output (the hand-over state, already output)."""
+        return replace(self, t=self.t[1:], y=self.y[1:], derived={key: value[1:] for key, value in self.derived.items()})
+
+
+def _output_rows(problem: MultibodyProblem, t0: float, options: SolverOptions) -> tuple[np.ndarray, int]:
+    """The output times left after ``t0`` (``t_eval`` strictly after it, or an empty array for
+    every step) and the number of rows to allocate."""
+    if problem.t_eval is None:
+        return np.empty(0), options.max_steps + 1
+    times = np.ascontiguousarray(problem.t_eval[problem.t_eval > t0] if t0 > problem.t0 else problem.t_eval)
+    return times, len(times)
+
+
+def _cvode_segment(problem: MultibodyProblem, options: SolverOptions, t0: float, y0: np.ndarray) -> _Segment:
+    """CVODE (Adams) on the Baumgarte ODE from ``(t0, y0)`` until ``t1`` or the approach to a
+    singular configuration (``flag`` 2)."""
+    model = problem.model
+    library = _driver(model, "cvode")
+    times, rows = _output_rows(problem, t0, options)
+    every_step = problem.t_eval is None
+    t_out, y_out = np.empty(rows + every_step), np.empty((rows + every_step, 2 * problem.m))
+    written, event_count, t_end = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(t0)
+    stats, events, y_end = np.zeros(4, dtype=np.int64), np.empty((_MAX_EVENTS, 5 + model.m)), np.empty(2 * model.m)
+    p, y0 = model.parameter_vector(t0), np.ascontiguousarray(y0, dtype=float)
+    callback = _PROGRESS(options.progress) if options.progress is not None else _PROGRESS()
+    flag = library.kronlag_cvode(
+        p.ctypes.data, t0, problem.t1, y0.ctypes.data, len(times), times.ctypes.data,
+        options.rtol / CompiledSolver.TOLERANCE_SCALE, options.atol / CompiledSolver.TOLERANCE_SCALE, problem.alpha,
+        problem.beta, options.max_step if np.isfinite(options.max_step) else 0.0, options.max_steps, len(t_out),
+        t_out.ctypes.data, y_out.ctypes.data, ctypes.byref(written), stats.ctypes.data, events.ctypes.data,
+        _MAX_EVENTS, ctypes.byref(event_count), ctypes.byref(t_end), y_end.ctypes.data, callback)
+    n = written.value
+    t_out, y_out = t_out[:n].copy(), y_out[:n].copy()
+    derived = {"qdd": np.empty((n, model.m)), "lam": np.empty((n, model.r)), "mu": np.empty((n, model.s)),
+               "kinetic_energy": np.empty(n), "potential_energy": np.empty(n),
+               "position_residual": np.empty((n, model.r)), "velocity_residual": np.empty((n, model.r + model.s))}
+    library.kronlag_outputs(p.ctypes.data, n, t_out.ctypes.data, y_out.ctypes.data,
+                            *(derived[key].ctypes.data for key in derived))
+    passages = tuple(_passage(model, record) for record in events[:min(event_count.value, _MAX_EVENTS)])
+    return _Segment(t=t_out, y=y_out, derived=derived, events=passages, flag=flag, t_end=t_end.value, y_end=y_end,
+                    steps=int(stats[0]), nfev=int(stats[1]), njev=int(stats[2]))
+
+
+def _index3_segment(problem: MultibodyProblem, options: SolverOptions, t0: float, y0: np.ndarray,
+                    handback: bool) -> _Segment:
+    """ALI3-P from the consistent state ``(t0, y0)`` until ``t1`` or, with ``handback``, until the
+    motion has left the neighbourhood of a singular configuration (``flag`` 1)."""
+    model, m, r = problem.model, problem.m, problem.model.r
+    library = _driver(model, "index3")
+    q0, qd0 = y0[:m], y0[m:]
+    try:
+        start = model.forward_dynamics(q0, qd0, t0)
+    except SingularConfigurationError:
+        # exactly at a singular configuration: the least-squares accelerations of the
+        # augmented Lagrangian start (the first step's Newton iteration corrects them)
+        start = None
+    a0 = np.zeros(m) if start is None else start.qdd
+    lam0 = np.zeros(r) if start is None else start.lam
+    times, rows = _output_rows(problem, t0, options)
+    every_step = problem.t_eval is None
+    rows += every_step
+    t_out, y_out = np.empty(rows), np.empty((rows, 2 * m))
+    qdd, lam = np.empty((rows, m)), np.empty((rows, r))
+    energies, phi, velocity = np.empty((rows, 2)), np.empty((rows, r)), np.empty((rows, r))
+    events, y_end = np.empty((_MAX_EVENTS, 5 + m)), np.empty(2 * m)
+    written, event_count, t_end = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(t0)
+    stats = np.zeros(4, dtype=np.int64)
+    callback = _PROGRESS(options.progress) if options.progress is not None else _PROGRESS()
+    p = model.parameter_vector(t0)
+    y0, a0, lam0 = (np.ascontiguousarray(x, dtype=float) for x in (y0, a0, lam0))
+    flag = library.kronlag_index3(
+        p.ctypes.data, len(p), t0, problem.t1, y0.ctypes.data, a0.ctypes.data, lam0.ctypes.data, len(times),
+        times.ctypes.data, options.rtol / Index3Solver.TOLERANCE_SCALE, options.atol,
+        0.0, options.max_step if np.isfinite(options.max_step) else 0.0,
+        options.max_steps, rows, int(handback), t_out.ctypes.data, y_out.ctypes.data, qdd.ctypes.data,
+        lam.ctypes.data, energies.ctypes.data, phi.ctypes.data, velocity.ctypes.data, ctypes.byref(written),
+        stats.ctypes.data, events.ctypes.data, _MAX_EVENTS, ctypes.byref(event_count), ctypes.byref(t_end),
+        y_end.ctypes.data, callback)
+    n = written.value
+    derived = {"qdd": qdd[:n].copy(), "lam": lam[:n].copy(), "mu": np.empty((n, 0)),
+               "kinetic_energy": energies[:n, 0].copy(), "potential_energy": energies[:n, 1].copy(),
+               "position_residual": phi[:n].copy(), "velocity_residual": velocity[:n].copy()}
+    passages = tuple(_passage(model, record) for record in events[:min(event_count.value, _MAX_EVENTS)])
+    return _Segment(t=t_out[:n].copy(), y=y_out[:n].copy(), derived=derived, events=passages, flag=flag,
+                    t_end=t_end.value, y_end=y_end, steps=int(stats[0]), nfev=int(stats[2]), njev=int(stats[3]))
+
+
+#: Failure flags of the C drivers (``src/kronlag/c/index3.c``; CVODE's own flags are named by
+#: ``kronlag_cvode_flag_name``) and what they mean.
+_INDEX3_FAILURES = {
+    -1: "reached the maximum number of steps ({max_steps})",
+    -2: "the step size fell below the smallest step (error test failures)",
+    -3: "Newton's method did not converge at the smallest step",
+    -4: "the velocities jump at a singular configuration: the motion would leave its branch",
+    -6: "the mass matrix is zero at the start",
+}
+
+
+def _failure_message(segment: _Segment, model: NumericModel, reason: str) -> str:
+    """``Integration failed at t = ..., q = ...: reason[; the nearest singular passage]``."""
+    q = segment.y_end[:model.m]
+    message = f"Integration failed at t = {segment.t_end:.6g}, q = {np.array2string(q, precision=6)}: {reason}"
+    return message + (f"; last passage: {segment.events[-1]}" if segment.events else "")
+
+
+def _solution(segments: Sequence[_Segment], status: int, message: str) -> Solution:
+    """The :class:`Solution` of consecutive segments."""
+    derived = {key: np.concatenate([segment.derived[key] for segment in segments]) for key in segments[0].derived}
+    return Solution(t=np.concatenate([segment.t for segment in segments]),
+                    y=np.concatenate([segment.y for segment in segments]), status=status, message=message,
+                    nfev=sum(segment.nfev for segment in segments), njev=sum(segment.njev for segment in segments),
+                    steps=sum(segment.steps for segment in segments), derived=derived,
+                    events=tuple(event for segment in segments for event in segment.events))
+
+
+_SUCCESS = "The integration reached the end of the time span."
 
 
 class CompiledSolver(Solver):
     """The Baumgarte index-1 ODE integrated entirely in compiled code, outputs projected.
 
     The model's C source (``model.c_source``) and a small SUNDIALS driver
-    (``_cvode_driver.c``) are compiled once per model into a shared library
+    (``src/kronlag/c/cvode.c``) are compiled once per model into a shared library
     (cached by hash) that calls the CVODE libraries of scikit-sundae.  CVODE
     (variable-order Adams-Moulton, Newton iteration with a dense
     difference-quotient Jacobian) integrates the Baumgarte-stabilized
     ``y = [q, qd]``, ``y' = [qd, qdd]`` of :class:`BaumgarteSolver`; every
-    output is projected onto the constraints by the projection of
-    :meth:`MultibodyProblem.project` written in C.  Python is called only at
-    the start and the end (and for ``progress``).  Needs the C backend and
-    constant parameters.
+    output is projected onto the constraints (least-norm corrections over the
+    independent rows, :mod:`kronlag.tolerances`).  Python is called only at the
+    start and the end (and for ``progress``); the accelerations, multipliers,
+    energies and residuals at the outputs are computed in C too.  Needs the C
+    backend and constant parameters.
+
+    At the approach to a singular configuration (:data:`kronlag.tolerances.APPROACH_RTOL`)
+    an index-1 formulation cannot tell the branches of the motion apart (IFToMM A02): the
+    integration ends there with status -1 and a message naming the configuration;
+    :class:`SwitchingSolver` (the default) passes it with ALI3-P.
 
     CVODE bounds a weighted RMS norm of the local error of a multistep method,
     and its global error at a given ``rtol`` is far larger than DOP853's
@@ -520,13 +710,12 @@ class CompiledSolver(Solver):
     TOLERANCE_SCALE``; then its error (2.3e-6) is below that of the DOP853
     methods at the requested tolerance, and the drift of the unprojected state
     stays below 1e-9 (3e-10) with the default ``alpha = beta = 10``.
-    Measured against BDF with CVODE's own projection (``CVodeSetProjFn``,
-    BDF only): Adams took fewer steps and was ten times more accurate.
     """
 
     name = "compiled"
     formulation = "index-1 ODE with Baumgarte stabilization, compiled; outputs projected"
     order = "1-12 (variable-order Adams-Moulton, SUNDIALS CVODE)"
+    requirements = "the C backend, constant parameters and a C compiler"
     #: CVODE's tolerances are the requested ones divided by this (see above).
     TOLERANCE_SCALE = 100.0
 
@@ -536,38 +725,117 @@ class CompiledSolver(Solver):
         return model.backend == "c" and not model.time_varying and codegen.c_compiler() is not None
 
     def solve(self, problem: MultibodyProblem) -> Solution:
+        _require(self, problem.model)
+        segment = _cvode_segment(problem, self.options, problem.t0, problem.y0)
+        return _solution([segment], *self._status(segment, problem.model))
+
+    def _status(self, segment: _Segment, model: NumericModel) -> tuple[int, str]:
+        if segment.flag == 0:
+            return 0, _SUCCESS
+        if segment.flag == 2:
+            return -1, _approach_message(segment, model)
+        name = _driver(model, "cvode").kronlag_cvode_flag_name(segment.flag).decode()
+        return -1, _failure_message(segment, model, f"CVODE {name} ({segment.flag})")
+
+
+def _approach_message(segment: _Segment, model: NumericModel) -> str:
+    q = segment.y_end[:model.m]
+    return (f"Stopped at t = {segment.t_end:.6g}, q = {np.array2string(q, precision=6)}: the motion approaches a "
+            "singular configuration (Phi_q nearly loses rank), where an index-1 formulation cannot tell the "
+            "branches of the motion apart; method='ali3p' or 'switching' (the default) passes it")
+
+
+def _require(solver: Solver, model: NumericModel) -> None:
+    if not solver.supports(model):
+        raise ValueError(f"method={solver.name!r} cannot run this model: {solver.requirements}")
+
+
+class Index3Solver(Solver):
+    """Index-3 augmented Lagrangian with mass-orthogonal projections (ALI3-P), compiled.
+
+    Integrates ``M qdd + C qd + g - f_Q + Phi_q^T lambda = 0``, ``Phi(q) = 0`` in
+    positions with the trapezoidal rule: Newton's method on ``q`` with the exact
+    tangent matrix ``J = M + h/2 D + h^2/4 (K + alpha Phi_q^T Phi_q)`` (``K``, ``D``
+    generated symbolically: the ``"tangent"`` kernel of :mod:`kronlag.codegen`),
+    the augmented Lagrangian update ``lambda* <- lambda* + alpha Phi`` and
+    projections of the velocities and accelerations in the metric of ``J`` (see
+    ``src/kronlag/c/index3.c``).  No rank decision enters a step: ``J`` stays
+    positive definite where ``Phi_q`` loses rank, so the method passes singular
+    configurations on the branch it is on (IFToMM A02) and integrates
+    mechanisms with redundant constraints (IFToMM A04); a velocity jump (a
+    branch switch) ends the run with status -1.  The local error
+    ``h^2/12 (qdd_{n+1} - qdd_n)`` in ``q`` is kept below ``atol + rtol |q|``;
+    outputs at ``t_eval`` are interpolated (cubic Hermite).  Second order: for
+    tight tolerances on long runs :class:`SwitchingSolver` is much faster.
+    """
+
+    name = "ali3p"
+    formulation = "index-3 augmented Lagrangian, mass-orthogonal projections (ALI3-P), compiled"
+    order = "2 (trapezoidal rule), local error control"
+    requirements = "the C backend, constant parameters, no nonholonomic constraints and a C compiler"
+    #: The driver's local error tolerances are the requested ones divided by this, so that the
+    #: global error at a given ``rtol`` is of the size the other methods give (measured on
+    #: IFToMM A02: the local error of a second-order method accumulates over ~1e4 steps).
+    TOLERANCE_SCALE = 10000.0
+
+    @staticmethod
+    def supports(model: NumericModel) -> bool:
+        """C backend, constant parameters, no nonholonomic constraints, a C compiler."""
+        return CompiledSolver.supports(model) and model.s == 0
+
+    def solve(self, problem: MultibodyProblem) -> Solution:
+        _require(self, problem.model)
+        segment = _index3_segment(problem, self.options, problem.t0, problem.y0, handback=False)
+        return _solution([segment], *_index3_status(segment, problem.model, self.options))
+
+
+def _index3_status(segment: _Segment, model: NumericModel, options: SolverOptions) -> tuple[int, str]:
+    if segment.flag == 0:
+        return 0, _SUCCESS
+    return -1, _failure_message(segment, model, _INDEX3_FAILURES[segment.flag].format(max_steps=options.max_steps))
+
+
+class SwitchingSolver(Solver):
+    """CVODE (:class:`CompiledSolver`) away from singular configurations, ALI3-P
+    (:class:`Index3Solver`) through them; the default.
+
+    The fast high-order method integrates while ``Phi_q`` is well conditioned; at
+    the approach to a singular configuration (:data:`kronlag.tolerances.APPROACH_RTOL`)
+    the index-3 method takes over from the projected state and passes it on the
+    branch the motion is on; once the motion is clear of it
+    (:data:`~kronlag.tolerances.LEAVE_RTOL`) CVODE continues.  A model whose
+    constraints are redundant at the start (``Phi_q`` rank deficient) is integrated
+    by ALI3-P throughout.  Smooth problems cost what :class:`CompiledSolver` costs.
+    """
+
+    name = "switching"
+    formulation = "CVODE on the Baumgarte ODE; ALI3-P near singular configurations (both compiled)"
+    order = "1-12 (Adams-Moulton) away from singular configurations, 2 (trapezoidal) near them"
+    requirements = Index3Solver.requirements
+    supports = staticmethod(Index3Solver.supports)
+
+    def solve(self, problem: MultibodyProblem) -> Solution:
+        _require(self, problem.model)
         model, options = problem.model, self.options
-        if not self.supports(model):
-            raise ValueError("method='compiled' needs a model with backend='c', constant parameters "
-                             "and a C compiler")
-        library = _cvode_library(model.c_source)
-        t_eval = problem.t_eval
-        rows = len(t_eval) if t_eval is not None else options.max_steps + 1
-        t_out, y_out = np.empty(rows), np.empty((rows, 2 * problem.m))
-        written, stats = ctypes.c_int(0), np.zeros(4, dtype=np.int64)
-        p, y0 = model.parameter_vector(problem.t0), problem.y0
-        times = np.ascontiguousarray(t_eval if t_eval is not None else np.empty(0))
-        callback = _PROGRESS(options.progress) if options.progress is not None else _PROGRESS()
-        flag = library.kronlag_cvode(
-            p.ctypes.data, problem.t0, problem.t1, y0.ctypes.data, len(times), times.ctypes.data,
-            options.rtol / self.TOLERANCE_SCALE, options.atol / self.TOLERANCE_SCALE, problem.alpha, problem.beta,
-            options.max_step if np.isfinite(options.max_step) else 0.0, options.max_steps,
-            t_out.ctypes.data, y_out.ctypes.data, ctypes.byref(written), stats.ctypes.data, callback)
-        n = written.value
-        t_out, y_out = t_out[:n].copy(), y_out[:n].copy()
-        derived = {"qdd": np.empty((n, problem.m)), "lam": np.empty((n, model.r)), "mu": np.empty((n, model.s)),
-                   "kinetic_energy": np.empty(n), "position_residual": np.empty((n, model.r)),
-                   "velocity_residual": np.empty((n, model.r + model.s))}
-        library.kronlag_outputs(p.ctypes.data, n, t_out.ctypes.data, y_out.ctypes.data,
-                                *(derived[key].ctypes.data for key in derived))
-        if flag == 0:
-            status, message = 0, "The integration reached the end of the time span."
-        else:
-            name = library.kronlag_cvode_flag_name(flag).decode()
-            end = t_out[n - 1] if n else problem.t0
-            status, message = -1, f"Integration failed after t = {end:.6g}: CVODE {name} ({flag})"
-        return Solution(t=t_out, y=y_out, status=status, message=message, nfev=int(stats[1]),
-                        njev=int(stats[2]), steps=int(stats[0]), derived=derived)
+        redundant = model.r and numerical_rank(np.linalg.svd(model.Phi_q(problem.q0, problem.t0),
+                                                             compute_uv=False), model.rank_rtol) < model.r
+        segments: list[_Segment] = []
+        t, y, index3 = problem.t0, problem.y0, bool(redundant)
+        while True:
+            steps_left = options.max_steps - sum(segment.steps for segment in segments)
+            budget = replace(options, max_steps=max(steps_left, 0))
+            if index3:
+                segment = _index3_segment(problem, budget, t, y, handback=not redundant)
+            else:
+                segment = _cvode_segment(problem, budget, t, y)
+            segments.append(segment.without_first_row() if segments and problem.t_eval is None else segment)
+            if segment.flag == 0:
+                return _solution(segments, 0, _SUCCESS)
+            if segment.flag < 0:
+                status = (_index3_status(segment, model, options) if index3 else
+                          CompiledSolver(options)._status(segment, model))
+                return _solution(segments, *status)
+            t, y, index3 = segment.t_end, segment.y_end, not index3
 
 
 #: Methods by name (``"auto"`` picks among them in :func:`simulate`).
@@ -576,7 +844,13 @@ METHODS: dict[str, type[Solver]] = {
     ProjectionSolver.name: ProjectionSolver,
     GGLSolver.name: GGLSolver,
     CompiledSolver.name: CompiledSolver,
+    Index3Solver.name: Index3Solver,
+    SwitchingSolver.name: SwitchingSolver,
 }
+
+
+#: What ``method="auto"`` picks: the first of these that supports the model.
+AUTO_PREFERENCE = (SwitchingSolver.name, CompiledSolver.name, ProjectionSolver.name)
 
 
 def _output_times(t_eval: Sequence[float] | np.ndarray | None, t0: float, t1: float) -> np.ndarray | None:
@@ -611,12 +885,15 @@ def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray) -> dict
 def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, started: float) -> Trajectory:
     """The :class:`Trajectory` of ``solution``, with the derived quantities at its output times."""
     model, m = problem.model, problem.m
-    derived = solution.derived if solution.derived is not None else _derived(model, solution.t, solution.y)
-    potential = np.array([model.potential_energy(y[:m], t) for t, y in zip(solution.t, solution.y)])
+    derived = dict(solution.derived if solution.derived is not None else _derived(model, solution.t, solution.y))
+    if "potential_energy" not in derived:
+        derived["potential_energy"] = np.array([model.potential_energy(y[:m], t)
+                                                for t, y in zip(solution.t, solution.y)])
     return Trajectory(t=solution.t, q=solution.y[:, :m], qd=solution.y[:, m:], **derived,
-                      potential_energy=potential, coordinate_names=tuple(model.coordinate_names), model=model,
+                      coordinate_names=tuple(model.coordinate_names), model=model,
                       method=method, status=solution.status, message=solution.message, nfev=solution.nfev,
-                      njev=solution.njev, steps=solution.steps, wall_time=time.perf_counter() - started)
+                      njev=solution.njev, steps=solution.steps, wall_time=time.perf_counter() - started,
+                      events=solution.events)
 
 
 def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, method: str = "auto",
@@ -714,7 +991,7 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
 
 def _resolve_method(method: str, model: NumericModel) -> str:
     if method == "auto":
-        return CompiledSolver.name if CompiledSolver.supports(model) else ProjectionSolver.name
+        return next(name for name in AUTO_PREFERENCE if METHODS[name].supports(model))
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from 'auto', {', '.join(map(repr, METHODS))}")
     return method

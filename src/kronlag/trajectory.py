@@ -19,7 +19,39 @@ import numpy as np
 if TYPE_CHECKING:
     from .numeric import NumericModel
 
-__all__ = ["Trajectory"]
+__all__ = ["Trajectory", "SingularPassage"]
+
+
+@dataclass(frozen=True)
+class SingularPassage:
+    """A passage of the motion through or near a singular configuration, where the constraint
+    Jacobian ``Phi_q`` (nearly) loses rank at an instant (see :mod:`kronlag.tolerances`).
+
+    Attributes
+    ----------
+    t : float
+        Time of the closest approach (the smallest ``ratio``).
+    t_enter, t_exit : float
+        First and last accepted step with ``ratio < SINGULAR_RTOL``.
+    q : (m,)
+        Coordinates at ``t``.
+    ratio : float
+        Smallest ``sigma_rho / sigma_1`` of ``Phi_q`` seen (``rho``: the rank at the start).
+    constraints : tuple of str
+        The constraints whose rows become dependent there (the rows with a large entry in the
+        left singular vector of ``Phi_q`` that belongs to ``sigma_rho``).
+    """
+
+    t: float
+    t_enter: float
+    t_exit: float
+    q: np.ndarray
+    ratio: float
+    constraints: tuple[str, ...]
+
+    def __str__(self) -> str:
+        return (f"singular configuration at t = {self.t:.6g} (sigma ratio {self.ratio:.2g}; constraints "
+                f"{', '.join(self.constraints)}), q = {np.array2string(self.q, precision=6)}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +93,8 @@ class Trajectory:
         accepted steps.
     wall_time : float
         Seconds spent in :func:`kronlag.simulate`.
+    events : tuple of SingularPassage
+        Passages through or near singular configurations, in time order.
 
     Notes
     -----
@@ -91,6 +125,7 @@ class Trajectory:
     njev: int
     steps: int
     wall_time: float
+    events: tuple[SingularPassage, ...] = ()
 
     @property
     def success(self) -> bool:

@@ -1,20 +1,22 @@
 /* kronlag compiled integrator: SUNDIALS CVODE (Adams-Moulton) on the Baumgarte index-1 ODE,
  * with the outputs projected onto the constraint manifold.
  *
- * Appended to the C source of a kronlag NumericModel (NumericModel.c_source),
- * which defines KRONLAG_M, KRONLAG_R, KRONLAG_S, KRONLAG_P,
- *   kronlag_forward_dynamics(t, q, qd, p, alpha, beta, qdd, lam, mu)   and
- *   kronlag_dynamics(t, q, qd, p, terms),  terms = [M (m*m), h (m), Phi (r),
- *     Phi_q (r*m), gamma (r), A (s*m), b (s), gamma_nh (s)], row-major.
+ * Appended to the C source of a kronlag NumericModel (NumericModel.c_source) with its
+ * "potential_energy" kernel and monitor.c (kronlag.simulation.CompiledSolver); reads
+ * KRONLAG_M, KRONLAG_R, KRONLAG_S, the block offsets KRONLAG_DYNAMICS_* and the policy macros
+ * of tolerances.py, and calls kronlag_forward_dynamics and kronlag_dynamics.
  *
  * State y = [q, qd] (2 m).  Right-hand side y' = [qd, qdd] with
  *   [[M, Phi_q^T, A^T], [Phi_q, 0, 0], [A, 0, 0]] [qdd; lam; mu]
  *     = [h; gamma - 2 alpha Phi_q qd - beta^2 Phi; gamma_nh - alpha (A qd + b)].
  * Projection (of every output; the integrator's own state is left alone, Baumgarte keeps its
- * drift small):
- *   q  <- q - Phi_q^T (Phi_q Phi_q^T)^-1 Phi(q)        (Gauss-Newton, until |Phi| <= atol / 100
+ * drift small), least-norm corrections over the independent rows (min_norm_correction):
+ *   q  <- q - Phi_q^+ Phi(q)                           (Gauss-Newton, until |Phi| <= atol / 100
  *                                                       or the steps reach rounding level)
- *   qd <- qd - B^T (B B^T)^-1 (B qd + c),  B = [Phi_q; A], c = [0; b].
+ *   qd <- qd - B^+ (B qd + c),  B = [Phi_q; A], c = [0; b].
+ * Singular configurations (monitor.c): the steps are limited so that the approach to one is seen;
+ * there the integration stops with KL_APPROACH (an index-1 formulation cannot tell the branches
+ * apart), and the switching method continues with ALI3-P.
  *
  * Adams-Moulton (orders 1-12, Newton iteration with a dense difference-quotient Jacobian) rather
  * than BDF: mechanisms are not stiff, and on the four-bar Adams needed fewer steps and gave ten
@@ -55,6 +57,7 @@ extern int CVodeSetStopTime(void *mem, sunrealtype tstop);
 extern int CVodeSetMaxHnilWarns(void *mem, int mxhnil);
 extern int CVodeSetLinearSolver(void *mem, SUNLinearSolver LS, SUNMatrix A);
 extern int CVode(void *mem, sunrealtype tout, N_Vector yout, sunrealtype *tret, int itask);
+extern int CVodeGetDky(void *mem, sunrealtype t, int k, N_Vector dky);
 extern int CVodeGetNumSteps(void *mem, long *n);
 extern int CVodeGetNumRhsEvals(void *mem, long *n);
 extern int CVodeGetNumLinRhsEvals(void *mem, long *n);
@@ -63,18 +66,17 @@ extern char *CVodeGetReturnFlagName(long flag);
 extern void CVodeFree(void **mem);
 
 enum { KL_M = KRONLAG_M, KL_R = KRONLAG_R, KL_S = KRONLAG_S, KL_N = 2 * KRONLAG_M,
-       KL_K = KRONLAG_R + KRONLAG_S, KL_TERMS_ = KRONLAG_TERMS };
-enum { CV_ADAMS = 1, CV_NORMAL = 1, CV_ONE_STEP = 2, CV_TSTOP_RETURN = 1 };
-/* Offsets of the blocks of kronlag_dynamics' output. */
-enum { KL_PHI = KL_M * KL_M + KL_M, KL_PHI_Q = KL_PHI + KL_R, KL_A = KL_PHI_Q + KL_R * KL_M + KL_R,
-       KL_B = KL_A + KL_S * KL_M };
+       KL_K = KRONLAG_R + KRONLAG_S, KL_TERMS_ = KRONLAG_DYNAMICS_SIZE };
+enum { CV_ADAMS = 1, CV_ONE_STEP = 2 };
+enum { KL_PHI = KRONLAG_DYNAMICS_PHI, KL_PHI_Q = KRONLAG_DYNAMICS_PHI_Q, KL_A = KRONLAG_DYNAMICS_A,
+       KL_B = KRONLAG_DYNAMICS_B };
 #define KL_MAX_PROJECTION_ITERATIONS 8
-#define KL_DEPENDENT 1e-10  /* relative pivot of G G^T below which a constraint row is dependent */
 #define KL_STALL 1e-15  /* Gauss-Newton steps below KL_STALL (1 + |q|) end the iteration */
 #define KL_SETUP_FAILED (-1000)
 #define KL_VERSION_MISMATCH (-1001)
 #define KL_PROJECTION_FAILED (-1002)
 #define KL_TOO_MUCH_WORK (-1)  /* CV_TOO_MUCH_WORK */
+#define KL_APPROACH 2          /* stopped at the approach to a singular configuration */
 
 typedef struct {
     const double *p;
@@ -90,48 +92,6 @@ static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
     memcpy(dx, x + KL_M, KL_M * sizeof(double));
     /* A singular configuration is unrecoverable. */
     return kronlag_forward_dynamics(t, x, x + KL_M, data->p, data->alpha, data->beta, dx + KL_M, lam, mu) ? -1 : 0;
-}
-
-/* x <- x - G^T w with (G G^T) w = residual for the k x m matrix G (row-major): the least-norm
- * correction.  Cholesky of G G^T; a pivot below KL_DEPENDENT times its diagonal marks a row that
- * depends on earlier ones (redundant constraints), whose w is 0, so the correction satisfies the
- * independent rows and, for a consistent residual, all.  Returns nonzero if every row is zero. */
-static int kl_correct(const double *G, int k, const double *residual, double *x)
-{
-    double S[KL_K * KL_K + 1], w[KL_K + 1];
-    int independent[KL_K + 1], any = 0;
-    for (int i = 0; i < k; ++i)
-        for (int j = 0; j <= i; ++j) {
-            double sum = 0.0;
-            for (int c = 0; c < KL_M; ++c) sum += G[i * KL_M + c] * G[j * KL_M + c];
-            S[i * k + j] = sum;
-        }
-    for (int j = 0; j < k; ++j) {               /* S = L L^T in the lower triangle */
-        double diagonal = S[j * k + j], d = diagonal;
-        for (int c = 0; c < j; ++c) d -= S[j * k + c] * S[j * k + c];
-        independent[j] = d > KL_DEPENDENT * diagonal && d > 1e-300;
-        any |= independent[j];
-        S[j * k + j] = independent[j] ? sqrt(d) : 1.0;
-        for (int i = j + 1; i < k; ++i) {
-            double sum = S[i * k + j];
-            for (int c = 0; c < j; ++c) sum -= S[i * k + c] * S[j * k + c];
-            S[i * k + j] = independent[j] ? sum / S[j * k + j] : 0.0;
-        }
-    }
-    if (!any) return 1;
-    for (int i = 0; i < k; ++i) {              /* w = L^-T L^-1 residual over the independent rows */
-        double sum = residual[i];
-        for (int c = 0; c < i; ++c) sum -= S[i * k + c] * w[c];
-        w[i] = independent[i] ? sum / S[i * k + i] : 0.0;
-    }
-    for (int i = k - 1; i >= 0; --i) {
-        double sum = w[i];
-        for (int c = i + 1; c < k; ++c) sum -= S[c * k + i] * w[c];
-        w[i] = independent[i] ? sum / S[i * k + i] : 0.0;
-    }
-    for (int c = 0; c < KL_M; ++c)
-        for (int i = 0; i < k; ++i) x[c] -= G[i * KL_M + c] * w[i];
-    return 0;
 }
 
 /* The constraint rows B = [Phi_q; A] (k x m) and offsets c = [0; b] at q. */
@@ -160,7 +120,7 @@ static int kl_project(double t, double *x, const kl_data *data)
             if (largest <= data->tol || stalled) { converged = 1; break; }
             double before[KL_M];
             memcpy(before, q, sizeof before);
-            if (kl_correct(B, KL_R, terms + KL_PHI, q)) return 1;
+            if (min_norm_correction(B, KL_R, KL_M, terms + KL_PHI, q) == 0) return 1;
             stalled = 1;  /* a step at rounding level: Phi is as small as it gets */
             for (int i = 0; i < KL_M; ++i)
                 if (fabs(q[i] - before[i]) > KL_STALL * (1.0 + fabs(q[i]))) stalled = 0;
@@ -174,7 +134,7 @@ static int kl_project(double t, double *x, const kl_data *data)
             for (int j = 0; j < KL_M; ++j) sum += B[i * KL_M + j] * qd[j];
             residual[i] = sum;
         }
-        if (kl_correct(B, KL_K, residual, qd)) return 1;
+        if (min_norm_correction(B, KL_K, KL_M, residual, qd) == 0) return 1;
     }
     return 0;
 }
@@ -185,17 +145,21 @@ const char *kronlag_cvode_flag_name(int flag)
     if (flag == KL_SETUP_FAILED) return "setting up CVODE failed";
     if (flag == KL_VERSION_MISMATCH) return "the SUNDIALS library is not version 7";
     if (flag == KL_PROJECTION_FAILED) return "the projection onto the constraints failed";
+    if (flag == KL_APPROACH) return "approach to a singular configuration";
     return CVodeGetReturnFlagName(flag);
 }
 
 /* Integrate from (t0, y0) to t1 in at most max_steps steps.  Outputs: the n_eval times t_eval
- * or, with n_eval == 0, every step (max_steps + 1 rows at most), each projected onto the constraints:
- * t_out (rows), y_out (rows x 2m), *n_out rows written; stats = [steps, right-hand sides, Jacobians,
- * output projections].  progress (may be NULL) is called with the time after every step.  Returns 0, or a negative CVODE flag
+ * (interpolated by CVODE) or, with n_eval == 0, every step (at most max_rows rows), each projected
+ * onto the constraints: t_out, y_out (rows x 2m), *n_out rows written; stats = [steps,
+ * right-hand sides, Jacobians, output projections].  progress (may be NULL) is called with the time
+ * after every step.  Singular passages go to events (monitor.c, *n_events).  Returns 0, KL_APPROACH
+ * (*t_end, y_end: the projected state at the approach), or a negative CVODE flag
  * (kronlag_cvode_flag_name) with the outputs up to the failure. */
 int kronlag_cvode(const double *p, double t0, double t1, const double *y0, int n_eval, const double *t_eval,
-                  double rtol, double atol, double alpha, double beta, double max_step, long max_steps,
-                  double *t_out, double *y_out, int *n_out, long *stats, void (*progress)(double))
+                  double rtol, double atol, double alpha, double beta, double max_step, long max_steps, int max_rows,
+                  double *t_out, double *y_out, int *n_out, long *stats, double *events, int max_events,
+                  int *n_events, double *t_end, double *y_end, void (*progress)(double))
 {
     int major = 0, minor = 0, patch = 0;
     char label[64];
@@ -203,60 +167,74 @@ int kronlag_cvode(const double *p, double t0, double t1, const double *y0, int n
     if (major != 7) return KL_VERSION_MISMATCH;
     kl_data data = {p, alpha, beta, atol / 100.0};
     SUNContext ctx = NULL;
-    N_Vector y = NULL;
+    N_Vector y = NULL, dense = NULL;
     SUNMatrix J = NULL;
     SUNLinearSolver LS = NULL;
     void *mem = NULL;
-    int flag = KL_SETUP_FAILED, rows = 0;
+    int flag = KL_SETUP_FAILED, rows = 0, next = 0;
     long projections = 0;
+    double t = t0, terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1];
+    kl_monitor monitor;
+    kl_constraints(t0, y0, p, terms, B, c);
+    kl_monitor_start(&monitor, t0, y0, terms + KL_PHI_Q, events, max_events);
+    memcpy(y_end, y0, KL_N * sizeof(double));
     if (SUNContext_Create(0, &ctx) || SUNContext_ClearErrHandlers(ctx)) goto done;
-    if (!(y = N_VNew_Serial(KL_N, ctx)) || !(J = SUNDenseMatrix(KL_N, KL_N, ctx))
+    if (!(y = N_VNew_Serial(KL_N, ctx)) || !(dense = N_VNew_Serial(KL_N, ctx)) || !(J = SUNDenseMatrix(KL_N, KL_N, ctx))
         || !(LS = SUNLinSol_Dense(y, J, ctx)) || !(mem = CVodeCreate(CV_ADAMS, ctx))) goto done;
-    double *x = N_VGetArrayPointer(y);
+    double *x = N_VGetArrayPointer(y), *xi = N_VGetArrayPointer(dense);
     memcpy(x, y0, KL_N * sizeof(double));
     if (CVodeInit(mem, kl_rhs, t0, y) || CVodeSStolerances(mem, rtol, atol) || CVodeSetUserData(mem, &data)
         || CVodeSetLinearSolver(mem, LS, J)
-        || CVodeSetMaxNumSteps(mem, max_steps) || CVodeSetStopTime(mem, t1) || CVodeSetMaxHnilWarns(mem, -1)
-        || (max_step > 0.0 && CVodeSetMaxStep(mem, max_step))) goto done;
+        || CVodeSetMaxNumSteps(mem, max_steps) || CVodeSetStopTime(mem, t1) || CVodeSetMaxHnilWarns(mem, -1))
+        goto done;
     flag = 0;
-    double t = t0;
     if (n_eval == 0) {
         t_out[0] = t0;
         memcpy(y_out, x, KL_N * sizeof(double));
         rows = 1;
-        while (t < t1) {
-            if (rows > max_steps) { flag = KL_TOO_MUCH_WORK; break; }
-            flag = CVode(mem, t1, y, &t, CV_ONE_STEP);
-            if (flag < 0) break;
-            ++projections;
-            if (kl_project(t, x, &data)) { flag = KL_PROJECTION_FAILED; break; }
-            t_out[rows] = t;
-            memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
-            ++rows;
-            if (progress) progress(t);
-        }
     } else {
-        for (; rows < n_eval && t_eval[rows] <= t0; ++rows) {
-            t_out[rows] = t_eval[rows];
+        for (; next < n_eval && t_eval[next] <= t0; ++next, ++rows) {
+            t_out[rows] = t_eval[next];
             memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
-        }
-        for (; rows < n_eval; ++rows) {
-            long done = 0;
-            CVodeGetNumSteps(mem, &done);  /* max_steps counts all steps, not those per output */
-            if (done >= max_steps) { flag = KL_TOO_MUCH_WORK; break; }
-            CVodeSetMaxNumSteps(mem, max_steps - done);
-            flag = CVode(mem, t_eval[rows], y, &t, CV_NORMAL);
-            if (flag < 0) break;
-            ++projections;
-            if (kl_project(t, x, &data)) { flag = KL_PROJECTION_FAILED; break; }
-            t_out[rows] = t;
-            memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
-            if (progress) progress(t);
         }
     }
-    if (flag > 0) flag = 0;
+    for (long steps = 0; t < t1; ++steps) {
+        if (steps >= max_steps) { flag = KL_TOO_MUCH_WORK; break; }
+        double limit = kl_monitor_max_step(&monitor);
+        if (max_step > 0.0) limit = limit > 0.0 ? fmin(limit, max_step) : max_step;
+        CVodeSetMaxStep(mem, limit);
+        flag = CVode(mem, t1, y, &t, CV_ONE_STEP);
+        if (flag < 0) break;
+        flag = 0;
+        kl_constraints(t, x, p, terms, B, c);
+        double ratio = kl_monitor_observe(&monitor, t, x, terms + KL_PHI_Q);
+        if (n_eval == 0) {
+            if (rows < max_rows) {
+                ++projections;
+                t_out[rows] = t;
+                memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
+                if (kl_project(t, y_out + rows * KL_N, &data)) { flag = KL_PROJECTION_FAILED; break; }
+                ++rows;
+            }
+        } else {
+            for (; next < n_eval && t_eval[next] <= t; ++next, ++rows) {
+                ++projections;
+                CVodeGetDky(mem, t_eval[next], 0, dense);
+                t_out[rows] = t_eval[next];
+                memcpy(y_out + rows * KL_N, xi, KL_N * sizeof(double));
+                if (kl_project(t_eval[next], y_out + rows * KL_N, &data)) { flag = KL_PROJECTION_FAILED; break; }
+            }
+            if (flag) break;
+        }
+        if (progress) progress(t);
+        if (ratio < KRONLAG_APPROACH_RTOL) { flag = KL_APPROACH; break; }
+    }
+    memcpy(y_end, x, KL_N * sizeof(double));
+    if (flag == KL_APPROACH && kl_project(t, y_end, &data)) flag = KL_PROJECTION_FAILED;
 done:
     *n_out = rows;
+    *n_events = monitor.count;
+    *t_end = t;
     stats[0] = stats[1] = stats[2] = 0;
     stats[3] = projections;
     if (mem) {
@@ -270,6 +248,7 @@ done:
     }
     if (LS) SUNLinSolFree(LS);
     if (J) SUNMatDestroy(J);
+    if (dense) N_VDestroy(dense);
     if (y) N_VDestroy(y);
     if (ctx) SUNContext_Free(&ctx);
     return flag;
@@ -277,9 +256,10 @@ done:
 
 /* Derived outputs at the n states y (n x 2m) at times t: qdd (n x m), lam (n x r), mu (n x s) from
  * forward dynamics without Baumgarte terms (NaN where the configuration is singular), the kinetic
- * energy T = 1/2 qd^T M qd (n), Phi (n x r) and [Phi_q qd; A qd + b] (n x (r + s)). */
+ * energy T = 1/2 qd^T M qd (n), the potential energy (n), Phi (n x r) and [Phi_q qd; A qd + b]
+ * (n x (r + s)). */
 void kronlag_outputs(const double *p, int n, const double *t, const double *y, double *qdd, double *lam,
-                     double *mu, double *kinetic, double *phi, double *velocity)
+                     double *mu, double *kinetic, double *potential, double *phi, double *velocity)
 {
     double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1];
     for (int k = 0; k < n; ++k) {
@@ -295,6 +275,7 @@ void kronlag_outputs(const double *p, int n, const double *t, const double *y, d
         for (int i = 0; i < KL_M; ++i)
             for (int j = 0; j < KL_M; ++j) energy += qd[i] * terms[i * KL_M + j] * qd[j];
         kinetic[k] = 0.5 * energy;
+        kronlag_potential_energy(t[k], q, qd, p, potential + k);
         memcpy(phi + k * KL_R, terms + KL_PHI, KL_R * sizeof(double));
         for (int i = 0; i < KL_K; ++i) {
             double sum = c[i];

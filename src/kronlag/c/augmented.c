@@ -1,0 +1,123 @@
+/* kronlag: forward dynamics with multipliers, the augmented system solved by a null-space method
+ * (see kronlag.numeric.solve_augmented for the algorithm, and tolerances.py for the rank policy). */
+
+/* Solve [[M, G^T], [G, 0]] [qdd; nu] = [h; c] with G = [Phi_q; A] (K x m), rank-revealing.
+ * terms: the output of kronlag_dynamics (M, h, Phi, Phi_q, gamma, A, b, gamma_nh).
+ * Returns 0, or 1 when M is not positive definite on the null space of G. */
+static int kronlag_solve(const double *terms, const double *qd, double alpha, double beta,
+                         double *qdd, double *nu, int *rank)
+{
+    enum { m = KRONLAG_M, r = KRONLAG_R, s = KRONLAG_S, k = KRONLAG_K };
+    const double *M = terms + KRONLAG_DYNAMICS_M, *h = terms + KRONLAG_DYNAMICS_H, *Phi = terms + KRONLAG_DYNAMICS_PHI;
+    const double *Phi_q = terms + KRONLAG_DYNAMICS_PHI_Q, *gamma = terms + KRONLAG_DYNAMICS_GAMMA;
+    const double *A = terms + KRONLAG_DYNAMICS_A, *b = terms + KRONLAG_DYNAMICS_B;
+    const double *gamma_nh = terms + KRONLAG_DYNAMICS_GAMMA_NH;
+    double X[m * (k + 1)], tau[k + 1], c[k + 1], B[m * m], y[m];
+    int perm[k + 1];
+    /* X = G^T (m x k), c = [gamma - 2 alpha Phi_q qd - beta^2 Phi; gamma_nh - alpha (A qd + b)] */
+    for (int j = 0; j < k; ++j) {
+        const double *row = j < r ? Phi_q + j * m : A + (j - r) * m;
+        double velocity = 0.0;
+        for (int i = 0; i < m; ++i) { X[i * k + j] = row[i]; velocity += row[i] * qd[i]; }
+        c[j] = j < r ? gamma[j] - 2.0 * alpha * velocity - beta * beta * Phi[j]
+                     : gamma_nh[j - r] - alpha * (velocity + b[j - r]);
+    }
+    house_qr(X, m, k, k, perm, tau);
+    int steps = m < k ? m : k;
+    double magnitudes[k + 1];
+    for (int j = 0; j < steps; ++j) magnitudes[j] = fabs(X[j * k + j]);
+    int rho = rank_of(magnitudes, steps);
+    *rank = rho;
+    /* B = Q^T M Q, y = Q^T h with Q = H_0 ... H_{rho-1}; Z = Q[:, rho:] spans the null space of G. */
+    memcpy(B, M, sizeof B);
+    memcpy(y, h, sizeof y);
+    for (int j = 0; j < rho; ++j) {
+        for (int col = 0; col < m; ++col) house_apply(X, m, k, j, tau[j], B + col, m);
+        for (int row = 0; row < m; ++row) house_apply(X, m, k, j, tau[j], B + row * m, 1);
+        house_apply(X, m, k, j, tau[j], y, 1);
+    }
+    /* R1^T = W T (second QR, K x rho), so that G = P R1^T Q1^T. Constraint part y1 = Q1^T qdd:
+     * T y1 = W^T P^T c (least squares when redundant rows are inconsistent). */
+    double W[(k + 1) * (k + 1)], wtau[k + 1], cp[k + 1];
+    for (int i = 0; i < k; ++i) {
+        cp[i] = c[perm[i]];
+        for (int j = 0; j < rho; ++j) W[i * k + j] = i >= j ? X[j * k + i] : 0.0;
+    }
+    house_qr(W, k, rho, k, NULL, wtau);
+    for (int j = 0; j < rho; ++j) house_apply(W, k, k, j, wtau[j], cp, 1);
+    double qt[m];
+    for (int i = rho - 1; i >= 0; --i) {
+        double sum = cp[i];
+        for (int j = i + 1; j < rho; ++j) sum -= W[i * k + j] * qt[j];
+        qt[i] = sum / W[i * k + i];
+    }
+    /* Null-space part y2: (Z^T M Z) y2 = Z^T h - Z^T M Q1 y1, Cholesky (fails if singular). */
+    int n = m - rho;
+    double L[m * m], z[m];
+    double largest = 0.0;
+    for (int i = 0; i < n; ++i) if (B[(rho + i) * m + rho + i] > largest) largest = B[(rho + i) * m + rho + i];
+    for (int i = 0; i < n; ++i) {
+        double sum = y[rho + i];
+        for (int j = 0; j < rho; ++j) sum -= B[(rho + i) * m + j] * qt[j];
+        z[i] = sum;
+        for (int j = 0; j <= i; ++j) {
+            double entry = B[(rho + i) * m + rho + j];
+            for (int l = 0; l < j; ++l) entry -= L[i * m + l] * L[j * m + l];
+            if (i == j) {
+                if (!(entry > KRONLAG_CHOLESKY_RTOL * largest)) return 1;
+                L[i * m + i] = sqrt(entry);
+            } else {
+                L[i * m + j] = entry / L[j * m + j];
+            }
+        }
+    }
+    for (int i = 0; i < n; ++i) {
+        for (int l = 0; l < i; ++l) z[i] -= L[i * m + l] * z[l];
+        z[i] /= L[i * m + i];
+    }
+    for (int i = n - 1; i >= 0; --i) {
+        for (int l = i + 1; l < n; ++l) z[i] -= L[l * m + i] * z[l];
+        z[i] /= L[i * m + i];
+    }
+    for (int i = 0; i < n; ++i) qt[rho + i] = z[i];
+    /* Multipliers, minimum norm: R1 P^T nu = Q1^T (h - M qdd) = y1 - B[:rho, :] qt,
+     * R1 = T^T W^T, so P^T nu = W T^{-T} (Q1^T (h - M qdd)). */
+    double a[k + 1];
+    for (int i = 0; i < rho; ++i) {
+        double sum = y[i];
+        for (int j = 0; j < m; ++j) sum -= B[i * m + j] * qt[j];
+        for (int j = 0; j < i; ++j) sum -= W[j * k + i] * a[j];
+        a[i] = sum / W[i * k + i];
+    }
+    for (int i = rho; i < k; ++i) a[i] = 0.0;
+    for (int j = rho - 1; j >= 0; --j) house_apply(W, k, k, j, wtau[j], a, 1);
+    for (int i = 0; i < k; ++i) nu[perm[i]] = a[i];
+    /* qdd = Q qt */
+    for (int j = rho - 1; j >= 0; --j) house_apply(X, m, k, j, tau[j], qt, 1);
+    memcpy(qdd, qt, sizeof qt);
+    return 0;
+}
+
+/* Forward dynamics with multipliers (Baumgarte alpha, beta); 0 on success, 1 if singular. */
+int kronlag_forward_dynamics(double t, const double *q, const double *qd, const double *p,
+                             double alpha, double beta, double *qdd, double *lam, double *mu)
+{
+    double terms[KRONLAG_DYNAMICS_SIZE + 1], nu[KRONLAG_K + 1];
+    int rank;
+    kronlag_dynamics(t, q, qd, p, terms);
+    int status = kronlag_solve(terms, qd, alpha, beta, qdd, nu, &rank);
+    for (int j = 0; j < KRONLAG_R; ++j) lam[j] = nu[j];
+    for (int j = 0; j < KRONLAG_S; ++j) mu[j] = nu[KRONLAG_R + j];
+    return status;
+}
+
+/* Entry point for Python: in = [t, alpha, beta, q (m), qd (m), p (P)], out = [qdd (m), lambda (r), mu (s)];
+ * returns the rank of [Phi_q; A], or -1 when the configuration is singular. */
+int kronlag_forward_dynamics_packed(const double *in, double *out)
+{
+    double terms[KRONLAG_DYNAMICS_SIZE + 1];
+    int rank;
+    const double *q = in + 3, *qd = q + KRONLAG_M;
+    kronlag_dynamics(in[0], q, qd, qd + KRONLAG_M, terms);
+    return kronlag_solve(terms, qd, in[1], in[2], out, out + KRONLAG_M, &rank) ? -1 : rank;
+}

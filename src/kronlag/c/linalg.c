@@ -1,0 +1,159 @@
+/* kronlag: dense linear algebra shared by the solvers and the integrators (generated code only
+ * includes this file; no allocation, variable-length arrays of the model's dimensions). */
+
+/* Householder QR of the rows x cols matrix a (row-major, leading dimension lda), in place:
+ * R in the upper triangle, reflector j (v_j[j] = 1) below the diagonal of column j, tau[j].
+ * With perm != NULL, column pivoting by the largest remaining norm (a P = Q R). */
+static void house_qr(double *a, int rows, int cols, int lda, int *perm, double *tau)
+{
+    int steps = rows < cols ? rows : cols;
+    if (perm)
+        for (int j = 0; j < cols; ++j) perm[j] = j;
+    for (int j = 0; j < steps; ++j) {
+        if (perm) {
+            int best = j; double best_norm = -1.0;
+            for (int c = j; c < cols; ++c) {
+                double norm = 0.0;
+                for (int i = j; i < rows; ++i) norm += a[i * lda + c] * a[i * lda + c];
+                if (norm > best_norm) { best_norm = norm; best = c; }
+            }
+            if (best != j) {
+                for (int i = 0; i < rows; ++i) {
+                    double swap = a[i * lda + j]; a[i * lda + j] = a[i * lda + best]; a[i * lda + best] = swap;
+                }
+                int swap = perm[j]; perm[j] = perm[best]; perm[best] = swap;
+            }
+        }
+        double alpha = a[j * lda + j], xnorm = 0.0;
+        for (int i = j + 1; i < rows; ++i) xnorm += a[i * lda + j] * a[i * lda + j];
+        if (xnorm == 0.0) { tau[j] = 0.0; continue; }
+        double beta = -copysign(sqrt(alpha * alpha + xnorm), alpha);
+        tau[j] = (beta - alpha) / beta;
+        for (int i = j + 1; i < rows; ++i) a[i * lda + j] /= alpha - beta;
+        a[j * lda + j] = beta;
+        for (int c = j + 1; c < cols; ++c) {
+            double w = a[j * lda + c];
+            for (int i = j + 1; i < rows; ++i) w += a[i * lda + j] * a[i * lda + c];
+            w *= tau[j];
+            a[j * lda + c] -= w;
+            for (int i = j + 1; i < rows; ++i) a[i * lda + c] -= w * a[i * lda + j];
+        }
+    }
+}
+
+/* x <- H_j x for the reflector stored in column j of a (rows x ., leading dimension lda). */
+static void house_apply(const double *a, int rows, int lda, int j, double tau, double *x, int stride)
+{
+    if (tau == 0.0) return;
+    double w = x[j * stride];
+    for (int i = j + 1; i < rows; ++i) w += a[i * lda + j] * x[i * stride];
+    w *= tau;
+    x[j * stride] -= w;
+    for (int i = j + 1; i < rows; ++i) x[i * stride] -= w * a[i * lda + j];
+}
+
+/* LU factorization with partial pivoting of the n x n row-major matrix a, in place.
+ * Returns 0, or 1 if a pivot is exactly zero (the matrix is singular). */
+static int lu_factor(double *a, int n, int *piv)
+{
+    for (int j = 0; j < n; ++j) {
+        int best = j;
+        for (int i = j + 1; i < n; ++i) if (fabs(a[i * n + j]) > fabs(a[best * n + j])) best = i;
+        piv[j] = best;
+        if (a[best * n + j] == 0.0) return 1;
+        if (best != j)
+            for (int c = 0; c < n; ++c) { double swap = a[j * n + c]; a[j * n + c] = a[best * n + c]; a[best * n + c] = swap; }
+        double inverse = 1.0 / a[j * n + j];
+        for (int i = j + 1; i < n; ++i) {
+            double factor = a[i * n + j] *= inverse;
+            if (factor != 0.0)
+                for (int c = j + 1; c < n; ++c) a[i * n + c] -= factor * a[j * n + c];
+        }
+    }
+    return 0;
+}
+
+/* x <- a^-1 x with the factors of lu_factor. */
+static void lu_solve(const double *a, int n, const int *piv, double *x)
+{
+    /* the factorization swapped whole rows (the multipliers with them): all swaps first */
+    for (int j = 0; j < n; ++j)
+        if (piv[j] != j) { double swap = x[j]; x[j] = x[piv[j]]; x[piv[j]] = swap; }
+    for (int j = 0; j < n; ++j)
+        for (int i = j + 1; i < n; ++i) x[i] -= a[i * n + j] * x[j];
+    for (int i = n - 1; i >= 0; --i) {
+        double sum = x[i];
+        for (int c = i + 1; c < n; ++c) sum -= a[i * n + c] * x[c];
+        x[i] = sum / a[i * n + i];
+    }
+}
+
+/* |diag R| of the column-pivoted QR of G^T, G = rows x m (row-major), in decreasing order:
+ * the rank-revealing magnitudes that tolerances.py speaks of.  perm[i] is the constraint row
+ * behind magnitudes[i]. */
+static void rank_magnitudes(const double *G, int rows, int m, double *magnitudes, int *perm)
+{
+    double X[m * (rows + 1)], tau[rows + 1];
+    for (int i = 0; i < m; ++i)
+        for (int j = 0; j < rows; ++j) X[i * rows + j] = G[j * m + i];
+    house_qr(X, m, rows, rows, perm, tau);
+    int steps = m < rows ? m : rows;
+    for (int j = 0; j < rows; ++j) magnitudes[j] = j < steps ? fabs(X[j * rows + j]) : 0.0;
+}
+
+/* Number of magnitudes above KRONLAG_RANK_RTOL times the first (the largest). */
+static int rank_of(const double *magnitudes, int n)
+{
+    int rank = 0;
+    while (rank < n && magnitudes[rank] > KRONLAG_RANK_RTOL * magnitudes[0]) ++rank;
+    return rank;
+}
+
+/* x <- x - dx, dx the least-norm solution of G dx = residual for the rows x m matrix G
+ * (row-major), over its independent rows (rank_of of the pivoted QR of G^T): redundant rows are
+ * dropped, and for a consistent residual they are met as well.  Returns the rank. */
+static int min_norm_correction(const double *G, int rows, int m, const double *residual, double *x)
+{
+    double X[m * (rows + 1)], tau[rows + 1], magnitudes[rows + 1], y[m];
+    int perm[rows + 1];
+    for (int i = 0; i < m; ++i)
+        for (int j = 0; j < rows; ++j) X[i * rows + j] = G[j * m + i];
+    house_qr(X, m, rows, rows, perm, tau);
+    int steps = m < rows ? m : rows;
+    for (int j = 0; j < steps; ++j) magnitudes[j] = fabs(X[j * rows + j]);
+    int rank = rank_of(magnitudes, steps);
+    /* P^T G = R^T Q^T: R1^T y1 = (P^T residual)[:rank] (forward substitution), y2 = 0, dx = Q y. */
+    for (int i = 0; i < m; ++i) y[i] = 0.0;
+    for (int i = 0; i < rank; ++i) {
+        double sum = residual[perm[i]];
+        for (int j = 0; j < i; ++j) sum -= X[j * rows + i] * y[j];
+        y[i] = sum / X[i * rows + i];
+    }
+    for (int j = rank - 1; j >= 0; --j) house_apply(X, m, rows, j, tau[j], y, 1);
+    for (int i = 0; i < m; ++i) x[i] -= y[i];
+    return rank;
+}
+
+/* The least-squares solution lam (rows) of G^T lam = b for the rows x m matrix G (row-major), over
+ * its independent rows (rank_of of the pivoted QR of G^T; the others get 0): the multipliers that
+ * balance the forces b.  Returns the rank. */
+static int least_squares_transpose(const double *G, int rows, int m, const double *b, double *lam)
+{
+    double X[m * (rows + 1)], tau[rows + 1], magnitudes[rows + 1], y[m], solution[rows + 1];
+    int perm[rows + 1];
+    for (int i = 0; i < m; ++i)
+        for (int j = 0; j < rows; ++j) X[i * rows + j] = G[j * m + i];
+    house_qr(X, m, rows, rows, perm, tau);
+    int steps = m < rows ? m : rows;
+    for (int j = 0; j < steps; ++j) magnitudes[j] = fabs(X[j * rows + j]);
+    int rank = rank_of(magnitudes, steps);
+    memcpy(y, b, m * sizeof(double));
+    for (int j = 0; j < rank; ++j) house_apply(X, m, rows, j, tau[j], y, 1);   /* y = Q^T b */
+    for (int i = rank - 1; i >= 0; --i) {                                        /* R1 s = y1 */
+        double sum = y[i];
+        for (int j = i + 1; j < rank; ++j) sum -= X[i * rows + j] * solution[j];
+        solution[i] = sum / X[i * rows + i];
+    }
+    for (int i = 0; i < rows; ++i) lam[perm[i]] = i < rank ? solution[i] : 0.0;
+    return rank;
+}
