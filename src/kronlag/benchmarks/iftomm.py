@@ -288,9 +288,9 @@ def _bricard() -> Benchmark:
 
 # -- A05 stiff flyball governor -----------------------------------------------------------------
 
-FLYBALL_PARAMETERS = {"L": 1.0, "w": 0.01, "b": 0.1, "d": 0.05, "m_shaft": 3000 * 1.0 * 0.01**2,
-                      "m_rod": 3000 * 1.0 * 0.01**2, "m_slider": 3000 * 0.1**3, "m_ball": 5.0, "k": 8e5, "c": 4e4,
-                      "l0": 0.5, "g": G}
+#: Masses from the density 3000 kg/m^3: 1 x 0.01 x 0.01 m shaft and rods, 0.1 m cube slider.
+FLYBALL_PARAMETERS = {"L": 1.0, "w": 0.01, "b": 0.1, "d": 0.05, "m_shaft": 0.3, "m_rod": 0.3, "m_slider": 3.0,
+                      "m_ball": 5.0, "k": 8e5, "c": 4e4, "l0": 0.5, "g": G}
 FLYBALL_RTOL = 1e-11
 
 
