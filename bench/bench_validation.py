@@ -79,11 +79,8 @@ def case_name(code: str, options: dict) -> str:
 
 
 def run_kronlag(benchmark: iftomm.Benchmark, model: kronlag.NumericModel, method: str, case: str) -> Run:
-    q0, qd0 = benchmark.initial_state(model)
-    rtol = RTOL.get(benchmark.code, DEFAULT_RTOL)
     try:
-        trajectory = kronlag.simulate(model, benchmark.t_span, q0, qd0, method=method, rtol=rtol, atol=ATOL,
-                                      t_eval=benchmark.t_eval)
+        trajectory = benchmark.simulate(model, method=method, rtol=RTOL.get(benchmark.code, DEFAULT_RTOL), atol=ATOL)
     except Exception as error:  # a crash is a result here: it goes into the table
         return Run(case, method, f"raised {type(error).__name__}: {error}"[:80], np.nan, np.nan, np.nan, None,
                    None, np.empty(0), np.empty((0, 1)))

@@ -24,6 +24,11 @@ MODEL_BUILDERS = {
     "chaplygin_sleigh": models.chaplygin_sleigh,
     "closed_chain_4_absolute": functools.partial(models.closed_chain, 4, "absolute"),
     "closed_chain_4_relative": functools.partial(models.closed_chain, 4, "relative"),
+    "pendulum_cartesian": models.pendulum_cartesian,
+    "n_four_bar": models.n_four_bar,
+    "andrews_squeezer": models.andrews_squeezer,
+    "bricard": models.bricard,
+    "flyball_governor": models.flyball_governor,
 }
 
 #: Digits of the numeric evaluations and the relative tolerance of comparisons.
