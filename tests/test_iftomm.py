@@ -160,7 +160,7 @@ def test_andrews_equations_match_the_test_set():
         bep, thp, _, php, dep, omp, epp = qd
         m1, m2, m3, m4, m5, m6, m7 = (p[f"m{k}"] for k in range(1, 8))
         i1, i2, i3, i4, i5, i6, i7 = (p[f"I{k}"] for k in range(1, 8))
-        d, da, e, ea, rr, ra, ss, u, zf, zt, fa = (p[k] for k in "d da e ea rr ra ss u zf zt fa".split())
+        d, da, e, ea, rr, ra, ss, u, zf, zt, fa = (p[k] for k in ("d", "da", "e", "ea", "rr", "ra", "ss", "u", "zf", "zt", "fa"))
         M = np.zeros((7, 7))
         M[0, 0] = m1 * ra**2 + m2 * (rr**2 - 2 * da * rr * np.cos(th) + da**2) + i1 + i2
         M[1, 0] = M[0, 1] = m2 * (da**2 - da * rr * np.cos(th)) + i2

@@ -366,8 +366,8 @@ def andrews_squeezer() -> System:
     system.add_torque("body 1", mom, name="drive")
     system.add_drawing_line([O, P, E], name="bodies 1-2")
     system.add_drawing_line([B, far_ends["3"], D, B], name="body 3")
-    system.add_drawing_line([A, J4, E], name="bodies 5-4")
-    system.add_drawing_line([A, J6, E], name="bodies 7-6")
+    system.add_drawing_line([A, J4, far_ends["4"]], name="bodies 5-4")
+    system.add_drawing_line([A, J6, far_ends["6"]], name="bodies 7-6")
     system.add_drawing_line([D, C], name="spring")
     system.add_trace(P, name="P")
     return system
