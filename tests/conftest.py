@@ -24,6 +24,12 @@ MODEL_BUILDERS = {
     "chaplygin_sleigh": models.chaplygin_sleigh,
     "closed_chain_4_absolute": functools.partial(models.closed_chain, 4, "absolute"),
     "closed_chain_4_relative": functools.partial(models.closed_chain, 4, "relative"),
+    "pendulum_cartesian": models.pendulum_cartesian,
+    "n_four_bar": models.n_four_bar,
+    "andrews_squeezer": models.andrews_squeezer,
+    "flyball_governor": models.flyball_governor,
+    # Not models.bricard: its symbolic C (2 MB of text) is too large for the 30-digit
+    # comparisons of the identity tests; tests/test_iftomm.py checks it numerically.
 }
 
 #: Digits of the numeric evaluations and the relative tolerance of comparisons.

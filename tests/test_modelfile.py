@@ -33,8 +33,16 @@ EXAMPLES = {
     "heavy_top": "heavy_top",
     "chaplygin_sleigh": "chaplygin_sleigh",
     "closed_chain_4": "closed_chain_4_absolute",
+    "pendulum_cartesian": "pendulum_cartesian",
+    "n_four_bar": "n_four_bar",
+    "andrews_squeezer": "andrews_squeezer",
+    "bricard": "bricard",
+    "flyball_governor": "flyball_governor",
 }
 COMPARED = ("M", "C", "g", "Phi_q", "A", "b", "f_Q")
+#: Examples whose symbolic C is too large to evaluate at 30 digits in a test (Bricard's: 2 MB of
+#: text); tests/test_iftomm.py compares their file and Python models numerically instead.
+NUMERIC_COMPARISON_ONLY = {"bricard"}
 
 
 def assert_same_equations(actual: kronlag.Equations, expected: kronlag.Equations) -> None:
@@ -48,7 +56,7 @@ def test_every_builtin_and_example_is_shipped():
     assert set(models.BUILTIN_MODELS) <= set(EXAMPLES)
 
 
-@pytest.mark.parametrize("name", sorted(EXAMPLES))
+@pytest.mark.parametrize("name", sorted(set(EXAMPLES) - NUMERIC_COMPARISON_ONLY))
 def test_example_derives_the_python_model(name):
     model = load_model(example_path(name))
     assert model.description

@@ -20,7 +20,13 @@ __all__ = [
     "slider_crank",
     "heavy_top",
     "chaplygin_sleigh",
+    "pendulum_cartesian",
+    "n_four_bar",
+    "andrews_squeezer",
+    "bricard",
+    "flyball_governor",
     "BUILTIN_MODELS",
+    "IFTOMM",
 ]
 
 cos, sin = sp.cos, sp.sin
@@ -179,6 +185,14 @@ def _rotation_x(angle) -> sp.Matrix:
     return sp.Matrix([[1, 0, 0], [0, cos(angle), -sin(angle)], [0, sin(angle), cos(angle)]])
 
 
+def _rotation_y(angle) -> sp.Matrix:
+    return sp.Matrix([[cos(angle), 0, sin(angle)], [0, 1, 0], [-sin(angle), 0, cos(angle)]])
+
+
+#: Elementary rotations by axis name.
+_ROTATIONS = {"x": _rotation_x, "y": _rotation_y, "z": _rotation_z}
+
+
 def heavy_top() -> System:
     """Heavy symmetric top spinning about a fixed point at the origin.
 
@@ -219,6 +233,249 @@ def chaplygin_sleigh() -> System:
     return system
 
 
+# -- the IFToMM multibody benchmark library, problem set A ---------------------------------------
+
+
+def pendulum_cartesian() -> System:
+    """IFToMM benchmark A01: simple pendulum in Cartesian coordinates.
+
+    Coordinates ``x, y``: position of the bob, a point mass ``m`` on a massless
+    rod of length ``L`` pinned at the origin; gravity ``g`` along -y.  One
+    constraint (r = 1, one degree of freedom)::
+
+        f = x**2 + y**2 - L**2 = 0
+    """
+    x, y = coordinates("x y")
+    m, L, g = sp.symbols("m L g")
+    system = System([x, y], parameters=[m, L, g], gravity=(0, -g), name="pendulum_cartesian")
+    system.add_body(PointMass("bob", mass=m, position=(x, y)))
+    system.add_constraint(x**2 + y**2 - L**2, name="rod")
+    system.add_drawing_line([(0, 0), (x, y)], name="rod")
+    system.add_trace((x, y), name="bob")
+    return system
+
+
+def n_four_bar(n: int = 2) -> System:
+    """IFToMM benchmark A02: N four-bar mechanism (``n`` four-bar loops in a row).
+
+    ``n + 1`` cranks of length ``L`` pinned to the ground at ``x = 0, L, ...,
+    n L`` and ``n`` couplers of length ``L`` joining their tips; all bars are
+    uniform (mass ``m``, central inertia ``J``), gravity ``g`` along -y.
+    Coordinates in chain order ``phi0, psi1, phi1, ..., psin, phin``: absolute
+    angles of the cranks (``phi``) and couplers (``psi``) from the x-axis.
+    Loop closure of coupler ``k`` (``k = 1..n``), 2 n constraints::
+
+        L cos(phi_{k-1}) + L cos(psi_k) - L cos(phi_k) - L = 0
+        L sin(phi_{k-1}) + L sin(psi_k) - L sin(phi_k) = 0
+
+    With cranks of equal length the mechanism has one degree of freedom; where
+    every bar is horizontal (``sin phi_k = sin psi_k = 0``) the x-rows of
+    ``Phi_q`` vanish and ``Phi_q`` loses rank (a singular configuration, where
+    the physical motion, all cranks parallel, meets non-physical branches).
+    """
+    if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+        raise ValueError(f"n_four_bar needs an integer number of loops n >= 1, got {n!r}")
+    names = ["phi0"] + [name for k in range(1, n + 1) for name in (f"psi{k}", f"phi{k}")]
+    q = coordinates(" ".join(names))
+    cranks, couplers = q[0::2], q[1::2]
+    L, m, J, g = sp.symbols("L m J g")
+    system = System(q, parameters=[L, m, J, g], gravity=(0, -g), name=f"n_four_bar_{n}")
+    tips = [(k * L + L * cos(phi), L * sin(phi)) for k, phi in enumerate(cranks)]
+    for k, phi in enumerate(cranks):
+        system.add_body(_bar(f"crank {k}", m, J, (k * L, 0), L, phi))
+        system.add_drawing_line([(k * L, 0), tips[k]], name=f"crank {k}")
+    for k, psi in enumerate(couplers, start=1):
+        system.add_body(_bar(f"coupler {k}", m, J, tips[k - 1], L, psi))
+        start = tips[k - 1]
+        system.add_constraint(start[0] + L * cos(psi) - tips[k][0], name=f"loop {k} x")
+        system.add_constraint(start[1] + L * sin(psi) - tips[k][1], name=f"loop {k} y")
+    coupler_joints = [tips[0]] + [(tip[0] + L * cos(psi), tip[1] + L * sin(psi))
+                                  for tip, psi in zip(tips, couplers)]
+    system.add_drawing_line(coupler_joints, name="couplers")
+    system.add_trace(tips[0], name="B0")
+    return system
+
+
+def andrews_squeezer() -> System:
+    """IFToMM benchmark A03: Andrews' squeezing mechanism, seven planar bodies.
+
+    The model of Hairer & Wanner (Solving ODEs II, Sec. VII.7) and of the
+    Bari/CWI Test Set for IVP Solvers (problem ``andrews``), with its
+    parameter names.  Coordinates ``beta, theta, gamma, phi, delta, Omega,
+    epsilon`` (the test set's ``omega`` is ``Omega`` here); no gravity.  Fixed
+    points O = (0, 0), A = (``xa``, ``ya``), B = (``xb``, ``yb``), C = (``xc``,
+    ``yc``).  Body 1 turns about O (angle ``beta``, centre of mass at ``ra``)
+    and carries body 2 at distance ``rr`` (angle ``beta + theta``, centre of
+    mass ``da`` behind the pin, length ``d``); body 3 turns about B (angle
+    ``gamma``); bodies 5 (``delta``) and 7 (``epsilon``) turn about A and
+    carry bodies 4 (``phi + delta``, pinned at distance ``zt``) and 6
+    (``Omega + epsilon``, pinned at distance ``u``).  The far ends of bodies
+    2, 4 and 6 and the point at ``ss`` on body 3 form one joint E::
+
+        rr cos(beta) - d cos(beta+theta) - ss sin(gamma) - xb = 0
+        rr sin(beta) - d sin(beta+theta) + ss cos(gamma) - yb = 0
+        rr cos(beta) - d cos(beta+theta) - e sin(phi+delta) - zt cos(delta) - xa = 0
+        rr sin(beta) - d sin(beta+theta) + e cos(phi+delta) - zt sin(delta) - ya = 0
+        rr cos(beta) - d cos(beta+theta) - zf cos(Omega+epsilon) - u sin(epsilon) - xa = 0
+        rr sin(beta) - d sin(beta+theta) - zf sin(Omega+epsilon) + u cos(epsilon) - ya = 0
+
+    A spring (``c0``, free length ``l0``) pulls the point D of body 3 (``sd``
+    along and ``sc`` across it) towards C; the torque ``mom`` drives body 1.
+    The centres of mass of bodies 3, 5 and 7 sit at ``(sa, sb)``, ``(ta,
+    tb)`` and ``(ua, ub)`` from their pivots in the body frames; without
+    gravity only their distances enter ``M``, which equals the test set's.
+    """
+    beta, theta, gamma, phi, delta, Omega, epsilon = coordinates("beta theta gamma phi delta Omega epsilon")
+    names = ("m1 m2 m3 m4 m5 m6 m7 xa ya xb yb xc yc c0 I1 I2 I3 I4 I5 I6 I7 d da e ea rr ra l0 "
+             "ss sa sb sc sd ta tb u ua ub zf zt fa mom")
+    parameters = sp.symbols(names)
+    (m1, m2, m3, m4, m5, m6, m7, xa, ya, xb, yb, xc, yc, c0, I1, I2, I3, I4, I5, I6, I7, d, da, e, ea, rr, ra,
+     l0, ss, sa, sb, sc, sd, ta, tb, u, ua, ub, zf, zt, fa, mom) = parameters
+    system = System([beta, theta, gamma, phi, delta, Omega, epsilon], parameters=parameters,
+                    name="andrews_squeezer")
+
+    def direction(angle):
+        return sp.Matrix([cos(angle), sin(angle)])
+
+    def normal(angle):  # direction(angle - pi/2)
+        return sp.Matrix([sin(angle), -cos(angle)])
+
+    O, A, B, C = sp.Matrix([0, 0]), sp.Matrix([xa, ya]), sp.Matrix([xb, yb]), sp.Matrix([xc, yc])
+    P = rr * direction(beta)                      # pin of body 2 on body 1
+    E = P - d * direction(beta + theta)           # the common joint
+    J4 = A + zt * direction(delta)                # pin of body 4 on body 5
+    J6 = A + u * normal(epsilon)                  # pin of body 6 on body 7
+    D = B + sd * direction(gamma) + sc * normal(gamma)
+    bodies = [
+        ("body 1", m1, I1, ra * direction(beta), beta),
+        ("body 2", m2, I2, P - da * direction(beta + theta), beta + theta),
+        ("body 3", m3, I3, B + sa * normal(gamma) + sb * direction(gamma), gamma),
+        ("body 4", m4, I4, J4 + (e - ea) * normal(phi + delta), phi + delta),
+        ("body 5", m5, I5, A + ta * direction(delta) - tb * normal(delta), delta),
+        ("body 6", m6, I6, J6 + (zf - fa) * direction(Omega + epsilon), Omega + epsilon),
+        ("body 7", m7, I7, A + ua * normal(epsilon) + ub * direction(epsilon), epsilon),
+    ]
+    for name, mass, inertia, centre, angle in bodies:
+        system.add_body(PlanarBody(name, mass=mass, inertia=inertia, position=centre, angle=angle))
+    far_ends = {"3": B + ss * normal(gamma), "4": J4 + e * normal(phi + delta),
+                "6": J6 + zf * direction(Omega + epsilon)}
+    for body, end in far_ends.items():
+        system.add_constraint((E - end)[0], name=f"E on body {body} x")
+        system.add_constraint((E - end)[1], name=f"E on body {body} y")
+    system.add_spring(D, C, stiffness=c0, free_length=l0, name="spring")
+    system.add_torque("body 1", mom, name="drive")
+    system.add_drawing_line([O, P, E], name="bodies 1-2")
+    system.add_drawing_line([B, far_ends["3"], D, B], name="body 3")
+    system.add_drawing_line([A, J4, far_ends["4"]], name="bodies 5-4")
+    system.add_drawing_line([A, J6, far_ends["6"]], name="bodies 7-6")
+    system.add_drawing_line([D, C], name="spring")
+    system.add_trace(P, name="P")
+    return system
+
+
+def _square_rod_inertia(mass, length, side, axis: str) -> sp.Matrix:
+    """Central inertia tensor of a rod of square section ``side`` lying along body ``axis``."""
+    along, across = mass * side**2 / 6, mass * (length**2 + side**2) / 12
+    return sp.diag(*(along if name == axis else across for name in "xyz"))
+
+
+def bricard() -> System:
+    """IFToMM benchmark A04: Bricard's overconstrained mechanism.
+
+    Five rods (length ``L``, mass ``m``, square section ``a``) in a closed
+    loop of six revolute joints, O = (0, 0, 0) axis y, P1 = (L, 0, 0) axis z,
+    P2 = (L, -L, 0) axis x, P3 = (L, -L, L) axis y, P4 = (0, -L, L) axis z,
+    P5 = (0, 0, L) axis x (to the ground); gravity ``g`` along -y.
+    Coordinates ``q1..q5``: the joint angles of the serial chain O..P4 about
+    the body-fixed joint axes, zero in the configuration above, so rod k
+    turns with ``R_k = R_y(q1) R_z(q2) R_x(q3) R_y(q4) R_z(q5)`` (the first k
+    factors).  Closure at P5, the chain's tip ``p5(q)`` and rod 5's x-axis
+    ``R_5 e_x`` (5 equations)::
+
+        p5(q) - (0, 0, L) = 0,    e_y . R_5 e_x = 0,    e_z . R_5 e_x = 0
+
+    Their Jacobian has rank 4, not 5: the mechanism moves with one degree of
+    freedom although ``m - r = 0`` (a redundant constraint).
+    """
+    q = coordinates("q1 q2 q3 q4 q5")
+    L, m, a, g = sp.symbols("L m a g")
+    system = System(q, parameters=[L, m, a, g], gravity=(0, -g, 0), name="bricard")
+    joint_axes = "yzxyz"
+    rod_axes = [("x", 1), ("y", -1), ("z", 1), ("x", -1), ("y", 1)]   # rod k along +-(body axis)
+    rotation = sp.eye(3)
+    joint = sp.zeros(3, 1)
+    joints = [joint]
+    for k, (joint_axis, (rod_axis, sign)) in enumerate(zip(joint_axes, rod_axes), start=1):
+        rotation = rotation * _ROTATIONS[joint_axis](q[k - 1])
+        along = sign * L * rotation[:, "xyz".index(rod_axis)]
+        system.add_body(RigidBody(f"rod {k}", mass=m, inertia=_square_rod_inertia(m, L, a, rod_axis),
+                                  position=joint + along / 2, rotation=rotation, simplify=False))
+        joint = joint + along
+        joints.append(joint)
+    for axis, value in zip("xyz", (0, 0, L)):
+        system.add_constraint(joint["xyz".index(axis)] - value, name=f"P5 {axis}")
+    for axis in "yz":
+        system.add_constraint(rotation["xyz".index(axis), 0], name=f"joint P5 axis {axis}")
+    system.add_drawing_line(joints, name="rods")
+    system.add_trace(joints[3], name="P3")
+    return system
+
+
+def flyball_governor() -> System:
+    """IFToMM benchmark A05: stiff flyball governor.
+
+    A vertical shaft (length ``L``, mass ``m_shaft``, square section ``w``)
+    turns freely about the z-axis (angle ``psi``).  Two rods (length ``L``,
+    mass ``m_rod``, section ``w``) hang from pins at height ``L`` and distance
+    ``d`` on either side of the axis; each turns about a pin axis normal to
+    the shaft's plane (angles ``theta1``, ``theta2`` below the horizontal) and
+    carries a ball, a point mass ``m_ball``, at its end.  A cubic slider
+    (side ``b``, mass ``m_slider``) turns with the shaft and slides along it
+    (height ``s`` of its centre).  The coupler rods of the classical governor
+    are replaced by spring-dampers (stiffness ``k``, free length ``l0``,
+    damping ``c``) from the middle of each rod to the side of the slider at
+    distance ``b/2`` from the axis; gravity ``g`` along -z.  No constraints
+    (m = 4, r = 0); the stiff spring-dampers make the equations stiff.
+
+    The data (1 m x 0.01 m x 0.01 m shaft and rods, 0.1 m slider, density
+    3000 kg/m^3, 5 kg balls, k = 8e5 N/m, c = 4e4 N s/m, l0 = 0.5 m, s = 0.5 m,
+    30 degrees, 2 pi rad/s) are those of the IFToMM library page; its geometry
+    (pins 0.05 m off the axis at the shaft's top, springs from rod middles to
+    the slider's faces) follows Exudyn's implementation of the benchmark
+    (``stiffFlyballGovernor.py``).  In this initial position the springs are
+    at their free length.
+    """
+    psi, theta1, theta2, s = coordinates("psi theta1 theta2 s")
+    L, w, b, d, m_shaft, m_rod, m_slider, m_ball, k, c, l0, g = sp.symbols(
+        "L w b d m_shaft m_rod m_slider m_ball k c l0 g")
+    system = System([psi, theta1, theta2, s], parameters=[L, w, b, d, m_shaft, m_rod, m_slider, m_ball, k, c, l0, g],
+                    gravity=(0, 0, -g), name="flyball_governor")
+    spin = _rotation_z(psi)
+    system.add_body(RigidBody("shaft", mass=m_shaft, inertia=_square_rod_inertia(m_shaft, L, w, "z"),
+                              position=(0, 0, L / 2), rotation=spin))
+    system.add_body(RigidBody("slider", mass=m_slider, inertia=sp.eye(3) * m_slider * b**2 / 6,
+                              position=(0, 0, s), rotation=spin))
+    drawing = [[sp.Matrix([0, 0, 0]), sp.Matrix([0, 0, L])]]
+    for side, theta in enumerate((theta1, theta2), start=1):
+        plane = _rotation_z(psi + (side - 1) * sp.pi)       # the rod's vertical plane
+        rotation = plane * _rotation_y(theta)
+        pin = plane * sp.Matrix([d, 0, L])
+        axis = rotation[:, 0]
+        middle, end = pin + L / 2 * axis, pin + L * axis
+        system.add_body(RigidBody(f"rod {side}", mass=m_rod, inertia=_square_rod_inertia(m_rod, L, w, "x"),
+                                  position=middle, rotation=rotation))
+        system.add_body(PointMass(f"ball {side}", mass=m_ball, position=end))
+        attachment = plane * sp.Matrix([b / 2, 0, s])
+        system.add_spring(middle, attachment, stiffness=k, free_length=l0, name=f"spring {side}")
+        system.add_damper(middle, attachment, coefficient=c, name=f"damper {side}")
+        drawing.append([pin, end])
+        drawing.append([middle, attachment])
+        system.add_trace(end, name=f"ball {side}")
+    for name, line in zip(["shaft", "rod 1", "spring 1", "rod 2", "spring 2"], drawing):
+        system.add_drawing_line(line, name=name)
+    return system
+
+
 #: Built-in models by name (the CLI and model files use these names).
 BUILTIN_MODELS: dict[str, Callable[[], System]] = {
     "four_bar": four_bar,
@@ -227,4 +484,18 @@ BUILTIN_MODELS: dict[str, Callable[[], System]] = {
     "slider_crank": slider_crank,
     "heavy_top": heavy_top,
     "chaplygin_sleigh": chaplygin_sleigh,
+    "pendulum_cartesian": pendulum_cartesian,
+    "n_four_bar": n_four_bar,
+    "andrews_squeezer": andrews_squeezer,
+    "bricard": bricard,
+    "flyball_governor": flyball_governor,
+}
+
+#: The IFToMM benchmark problems A01-A05 (references in :mod:`kronlag.benchmarks.iftomm`).
+IFTOMM: dict[str, Callable[..., System]] = {
+    "A01": pendulum_cartesian,
+    "A02": n_four_bar,
+    "A03": andrews_squeezer,
+    "A04": bricard,
+    "A05": flyball_governor,
 }
