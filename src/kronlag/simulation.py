@@ -29,7 +29,7 @@ from scipy.integrate import DOP853
 
 from . import codegen
 from .numeric import SingularConfigurationError
-from .tolerances import numerical_rank
+from .tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
 from .trajectory import SingularPassage, Trajectory
 
 if TYPE_CHECKING:
@@ -54,6 +54,7 @@ class ProjectionError(RuntimeError):
     """The projection onto the constraint manifold did not converge."""
 
 
+_SUCCESS = "The integration reached the end of the time span."
 #: Failures of the model evaluation that end an integration (partial results are returned).
 _FAILURES = (SingularConfigurationError, ProjectionError, np.linalg.LinAlgError, FloatingPointError)
 #: Most Gauss-Newton iterations of one position projection.
@@ -248,13 +249,52 @@ class _Stepper(ABC):
     def counters(self) -> tuple[int, int]:
         """``(nfev, njev)`` so far."""
 
+    def limit_step(self, max_step: float) -> None:
+        """Bound the next step (where the integrator allows it; else nothing)."""
+
+
+class _ApproachWatch:
+    """The watch of ``src/kronlag/c/monitor.c`` for the Python-driven index-1 methods: the
+    singular ratio of ``Phi_q`` (:func:`kronlag.tolerances.singular_ratio`) at every accepted step,
+    the next step limited so that the ratio, extrapolated, keeps half its value, and the approach
+    to a singular configuration (ratio below :data:`~kronlag.tolerances.APPROACH_RTOL`)."""
+
+    def __init__(self, problem: MultibodyProblem):
+        self.model = problem.model
+        Phi_q = self.model.Phi_q(problem.q0, problem.t0)
+        self.generic_rank = numerical_rank(rank_magnitudes(Phi_q)[0], self.model.rank_rtol)
+        self.samples = [(problem.t0, singular_ratio(Phi_q, self.generic_rank)[0])]
+
+    def observe(self, t: float, y: np.ndarray) -> SingularPassage | None:
+        """The approach at the accepted state ``(t, y)``, or None."""
+        q = y[:self.model.m]
+        ratio, row = singular_ratio(self.model.Phi_q(q, t), self.generic_rank)
+        self.samples = [self.samples[-1], (t, ratio)]
+        if ratio >= APPROACH_RTOL:
+            return None
+        names = self.model.constraint_names
+        return SingularPassage(t=t, t_enter=t, t_exit=t, q=q.copy(), ratio=ratio, constraints=(names[row],))
+
+    def max_step(self) -> float:
+        """The largest next step (inf: no limit)."""
+        (t0, ratio0), (t1, ratio1) = self.samples[0], self.samples[-1]
+        rate = (ratio0 - ratio1) / (t1 - t0) if t1 > t0 else 0.0
+        return 0.5 * ratio1 / rate if rate > 0 else np.inf
+
+
+def _approach_text(t: float, q: np.ndarray) -> str:
+    return (f"Stopped at t = {t:.6g}, q = {np.array2string(q, precision=6)}: the motion approaches a "
+            "singular configuration (Phi_q nearly loses rank), where an index-1 formulation cannot tell the "
+            "branches of the motion apart; method='ali3p' or 'switching' (the default) passes it")
+
 
 def _march(make_stepper: Callable[[], _Stepper], problem: MultibodyProblem, options: SolverOptions) -> Solution:
     """Start ``make_stepper()`` and advance it to ``problem.t1``, collecting the outputs.
 
     Outputs are every accepted step (``t_eval is None``) or ``problem.t_eval``
-    (interpolated inside each step).  A model failure, an integrator failure or
-    ``options.max_steps`` steps end the loop with status -1.
+    (interpolated inside each step).  A model failure, an integrator failure,
+    ``options.max_steps`` steps or the approach to a singular configuration
+    (:class:`_ApproachWatch`) end the loop with status -1.
     """
     every_step = problem.t_eval is None
     outputs = [] if every_step else [float(t) for t in problem.t_eval]
@@ -266,15 +306,17 @@ def _march(make_stepper: Callable[[], _Stepper], problem: MultibodyProblem, opti
     initial = 1 if every_step else pending  # outputs at t0 are the initial state
     times += [problem.t0] * initial
     states += [problem.y0] * initial
-    steps, status, message = 0, 0, "The integration reached the end of the time span."
+    steps, status, message, events = 0, 0, _SUCCESS, ()
     stepper = None
     try:
+        watch = _ApproachWatch(problem)
         stepper = make_stepper()
         while stepper.t < problem.t1:
             if steps >= options.max_steps:
                 status, message = -1, (f"Reached the maximum number of steps ({options.max_steps}) "
                                        f"at t = {stepper.t:.6g}.")
                 break
+            stepper.limit_step(min(options.max_step, watch.max_step()))
             failure = stepper.step()
             if failure is not None:
                 status, message = -1, f"Integration failed at t = {stepper.t:.6g}: {failure}"
@@ -284,17 +326,22 @@ def _march(make_stepper: Callable[[], _Stepper], problem: MultibodyProblem, opti
                 times.append(stepper.t)
                 states.append(stepper.y)
             while pending < len(outputs) and outputs[pending] <= stepper.t:
+                state = stepper.interpolate(outputs[pending])  # first: it may fail
                 times.append(outputs[pending])
-                states.append(stepper.interpolate(outputs[pending]))
+                states.append(state)
                 pending += 1
             if options.progress is not None:
                 options.progress(stepper.t)
+            approach = watch.observe(stepper.t, stepper.y)
+            if approach is not None:
+                status, message, events = -1, _approach_text(stepper.t, approach.q), (approach,)
+                break
     except _FAILURES as error:
         where = stepper.t if stepper is not None else problem.t0
         status, message = -1, f"Integration failed at t = {where:.6g}: {type(error).__name__}: {error}"
     nfev, njev = stepper.counters() if stepper is not None else (0, 0)
     return Solution(t=np.asarray(times, dtype=float), y=np.reshape(states, (len(states), 2 * problem.m)),
-                    status=status, message=message, nfev=nfev, njev=njev, steps=steps)
+                    status=status, message=message, nfev=nfev, njev=njev, steps=steps, events=events)
 
 
 class _ScipyStepper(_Stepper):
@@ -337,6 +384,10 @@ class _ScipyStepper(_Stepper):
 
     def counters(self) -> tuple[int, int]:
         return self.solver.nfev, self.solver.njev
+
+    def limit_step(self, max_step: float) -> None:
+        self.solver.max_step = max_step
+        self.solver.h_abs = min(self.solver.h_abs, max_step)
 
 
 class BaumgarteSolver(Solver):
@@ -680,9 +731,6 @@ def _solution(segments: Sequence[_Segment], status: int, message: str) -> Soluti
                     events=tuple(event for segment in segments for event in segment.events))
 
 
-_SUCCESS = "The integration reached the end of the time span."
-
-
 class CompiledSolver(Solver):
     """The Baumgarte index-1 ODE integrated entirely in compiled code, outputs projected.
 
@@ -727,22 +775,18 @@ class CompiledSolver(Solver):
     def solve(self, problem: MultibodyProblem) -> Solution:
         _require(self, problem.model)
         segment = _cvode_segment(problem, self.options, problem.t0, problem.y0)
+        if segment.flag == 2:  # the approach is an event too
+            approach = _ApproachWatch(problem).observe(segment.t_end, segment.y_end)
+            segment = replace(segment, events=segment.events + ((approach,) if approach else ()))
         return _solution([segment], *self._status(segment, problem.model))
 
     def _status(self, segment: _Segment, model: NumericModel) -> tuple[int, str]:
         if segment.flag == 0:
             return 0, _SUCCESS
         if segment.flag == 2:
-            return -1, _approach_message(segment, model)
+            return -1, _approach_text(segment.t_end, segment.y_end[:model.m])
         name = _driver(model, "cvode").kronlag_cvode_flag_name(segment.flag).decode()
         return -1, _failure_message(segment, model, f"CVODE {name} ({segment.flag})")
-
-
-def _approach_message(segment: _Segment, model: NumericModel) -> str:
-    q = segment.y_end[:model.m]
-    return (f"Stopped at t = {segment.t_end:.6g}, q = {np.array2string(q, precision=6)}: the motion approaches a "
-            "singular configuration (Phi_q nearly loses rank), where an index-1 formulation cannot tell the "
-            "branches of the motion apart; method='ali3p' or 'switching' (the default) passes it")
 
 
 def _require(solver: Solver, model: NumericModel) -> None:

@@ -36,7 +36,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "SINGULAR_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "STRADDLE_RTOL", "numerical_rank", "check_rank_rtol", "c_macros"]
+__all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "SINGULAR_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "STRADDLE_RTOL", "numerical_rank", "check_rank_rtol", "rank_magnitudes",
+           "singular_ratio", "c_macros"]
 
 #: Default relative rank tolerance on ``[Phi_q; A]`` (see the module docstring).
 RANK_RTOL = 1e-8
@@ -69,6 +70,31 @@ def numerical_rank(magnitudes: np.ndarray, rank_rtol: float) -> int:
     if magnitudes.size == 0 or not magnitudes.max() > 0.0:
         return 0
     return int(np.count_nonzero(magnitudes > rank_rtol * magnitudes.max()))
+
+
+def rank_magnitudes(Phi_q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``|diag R|`` of the column-pivoted QR of ``Phi_q^T`` (decreasing) and the constraint row
+    behind each: the rank-revealing magnitudes (``rank_magnitudes`` in ``src/kronlag/c/linalg.c``)."""
+    from scipy.linalg import qr
+
+    if Phi_q.shape[0] == 0:
+        return np.zeros(0), np.zeros(0, dtype=int)
+    R, permutation = qr(Phi_q.T, mode="r", pivoting=True)
+    steps = min(Phi_q.shape)
+    magnitudes = np.zeros(Phi_q.shape[0])
+    magnitudes[:steps] = np.abs(np.diag(R)[:steps])
+    return magnitudes, permutation
+
+
+def singular_ratio(Phi_q: np.ndarray, generic_rank: int) -> tuple[float, int]:
+    """``magnitude[rho - 1] / magnitude[0]`` of :func:`rank_magnitudes` (1 when there is nothing to
+    lose) and the constraint row behind it (-1 then): falls like ``|t - t*|`` near a singular
+    configuration (``kronlag_singular_ratio`` in ``src/kronlag/c/monitor.c``)."""
+    if generic_rank == 0:
+        return 1.0, -1
+    magnitudes, permutation = rank_magnitudes(Phi_q)
+    ratio = magnitudes[generic_rank - 1] / magnitudes[0] if magnitudes[0] > 0 else 0.0
+    return float(ratio), int(permutation[generic_rank - 1])
 
 
 def c_macros(rank_rtol: float) -> str:
