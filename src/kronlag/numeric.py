@@ -35,6 +35,7 @@ __all__ = [
     "NumericModel",
     "ForwardDynamicsResult",
     "InverseDynamicsResult",
+    "ForwardDynamicsBatch",
     "SingularConfigurationError",
     "AssemblyError",
     "RedundantConstraintsWarning",
@@ -43,6 +44,14 @@ __all__ = [
 
 #: Kernels whose result is a vector (all others are matrices, even when 1 x 1).
 _VECTOR_KERNELS = frozenset({"g", "Phi", "b", "f_Q", "Cqd", "gamma", "gamma_nh", "potential_energy"})
+#: Kernels that read the speeds ``qd`` (the others read ``q`` and ``t`` only).
+_SPEED_KERNELS = frozenset({"C", "C_christoffel", "Cqd", "f_Q", "gamma", "gamma_nh"})
+#: The matrices :meth:`NumericModel.evaluate_batch` evaluates.
+BATCH_MATRICES = (*codegen.ACCESSOR_KERNELS, "C", "Cqd", "C_christoffel")
+#: Former backend names, still accepted with a DeprecationWarning.
+_DEPRECATED_BACKENDS = {"numpy": "python"}
+#: The dynamics kernel's blocks that are matrices (the others are vectors).
+_MATRIX_TERMS = frozenset({"M", "Phi_q", "A"})
 
 
 class SingularConfigurationError(RuntimeError):
@@ -109,6 +118,55 @@ class InverseDynamicsResult:
     lam: np.ndarray
     mu: np.ndarray
     unique: bool
+
+
+@dataclass(slots=True, eq=False)
+class ForwardDynamicsBatch:
+    """Solutions of the augmented system at N states (:meth:`NumericModel.forward_dynamics_batch`).
+
+    Attributes
+    ----------
+    qdd : (N, m) accelerations.
+    lam : (N, r) multipliers ``lambda``.
+    mu : (N, s) multipliers ``mu``.
+    rank : (N,) int
+        Numerical rank of ``[Phi_q; A]`` at each state; -1 marks a singular
+        configuration, whose row of ``qdd``, ``lam`` and ``mu`` is NaN.
+    """
+
+    qdd: np.ndarray
+    lam: np.ndarray
+    mu: np.ndarray
+    rank: np.ndarray
+
+
+def split_terms(kernel: codegen.Kernel, flat: np.ndarray) -> dict[str, np.ndarray]:
+    """The blocks of the ``"dynamics"`` kernel's flat output by name (``M``, ``h``, ``Phi``, ...), as views."""
+    terms, start = {}, 0
+    for block in kernel.blocks:
+        shape = block.shape if block.name in _MATRIX_TERMS else (block.size,)
+        terms[block.name] = flat[start:start + block.size].reshape(shape)
+        start += block.size
+    return terms
+
+
+def solve_dynamics_terms(kernel: codegen.Kernel, flat: np.ndarray, qd: np.ndarray, alpha: float,
+                         beta: float) -> tuple:
+    """Forward dynamics from the flat output of the ``"dynamics"`` kernel with :func:`solve_augmented`.
+
+    Returns ``(qdd, lam, mu, rank)``, or ``(None, None, None, -1)`` at a singular configuration:
+    the Python backend's twin of ``kronlag_forward_dynamics_packed`` in :data:`kronlag.codegen.C_SOLVER`.
+    """
+    terms = split_terms(kernel, flat)
+    r = len(terms["Phi"])
+    G = np.vstack([terms["Phi_q"], terms["A"]])
+    c = np.concatenate([terms["gamma"] - 2 * alpha * terms["Phi_q"] @ qd - beta ** 2 * terms["Phi"],
+                        terms["gamma_nh"] - alpha * (terms["A"] @ qd + terms["b"])])
+    solution = solve_augmented(terms["M"], terms["h"], G, c)
+    if solution is None:
+        return None, None, None, -1
+    qdd, nu, rank = solution
+    return qdd, nu[:r], nu[r:], rank
 
 
 def solve_augmented(M: np.ndarray, h: np.ndarray, G: np.ndarray, c: np.ndarray
@@ -187,25 +245,31 @@ class NumericModel:
     equations : Equations
     parameters : mapping
         Value (float or callable of ``t``) of every parameter, keyed by name or symbol.
-    backend : {"auto", "numpy", "c"}
-        ``"auto"`` is ``"c"`` when a C compiler is available, else ``"numpy"``.
+    backend : {"auto", "c", "python"}
+        ``"c"``: generated C, compiled; ``"python"``: generated Python (NumPy-vectorised
+        over batches), no compiler needed; ``"auto"``: ``"c"`` when a C compiler is
+        available and works, else ``"python"`` (with a RuntimeWarning when the
+        compiler fails).  ``"numpy"``, the former name of ``"python"``, is deprecated.
 
     Notes
     -----
     The forward-dynamics kernel is generated and compiled here; the other
     matrices on first use (``C``, ``Cqd`` and ``C_christoffel``, the largest,
-    each on its own).  With the C backend, ``forward_dynamics`` packs its
-    inputs into a buffer owned by the model: share a model between threads
-    only under a lock.
+    each on its own).  Every call uses its own buffers: a model may be shared
+    between threads.
     """
 
     def __init__(self, equations: Equations, parameters: Mapping, *, backend: str = "auto"):
-        if backend not in ("auto", "numpy", "c"):
-            raise ValueError(f"backend must be 'auto', 'numpy' or 'c', got {backend!r}")
-        if backend == "auto":
-            backend = "c" if codegen.c_compiler() else "numpy"
+        if backend in _DEPRECATED_BACKENDS:
+            warnings.warn(f"backend={backend!r} is deprecated, use backend={_DEPRECATED_BACKENDS[backend]!r}",
+                          DeprecationWarning, stacklevel=3)
+            backend = _DEPRECATED_BACKENDS[backend]
+        if backend != "auto" and backend not in codegen.BACKENDS:
+            raise ValueError(f"backend must be 'auto' or one of {', '.join(map(repr, codegen.BACKENDS))}, "
+                             f"got {backend!r}")
+        automatic = backend == "auto"
         self.equations = equations
-        self.backend = backend
+        self.backend = ("c" if codegen.c_compiler() else "python") if automatic else backend
         self.m, self.r, self.s = equations.shape
         self.coordinate_names = tuple(q.name for q in equations.coordinates)
         self._coordinate_index = {name: i for i, name in enumerate(self.coordinate_names)}
@@ -213,18 +277,19 @@ class NumericModel:
         self._p, self._time_varying = self._resolve(parameters)
         self.time_varying = bool(self._time_varying)
         self._source = codegen.KernelSource(equations)
-        self._libraries: dict[str, codegen.NumpyLibrary | codegen.CLibrary] = {}
-        self._dynamics = self._library("dynamics")
-        self._terms_layout = []
-        start = 0
-        for block in self._dynamics.kernels["dynamics"].blocks:
-            shape = block.shape if block.name in ("M", "Phi_q", "A") else (block.size,)
-            self._terms_layout.append((block.name, start, start + block.size, shape))
-            start += block.size
+        self._libraries: dict[str, codegen.KernelLibrary] = {}
+        self._evaluators: dict[str, Callable[..., np.ndarray]] = {}
+        try:
+            self._dynamics = self._library("dynamics")
+        except codegen.CompilerError as error:
+            if not automatic:
+                raise
+            warnings.warn(f"{equations.system.name}: the C compiler failed, using the (slower) Python backend: "
+                          f"{error}", RuntimeWarning, stacklevel=3)
+            self.backend = "python"
+            self._dynamics = self._library("dynamics")
+        self._forward = self._dynamics.forward_dynamics_function()
         self._warned_redundant = False
-        if backend == "c":
-            self._fd_in = np.concatenate([np.zeros(3 + 2 * self.m), self._p])
-            self._fd_call = self._dynamics.forward_dynamics_caller(self._fd_in)
 
     # -- parameters -----------------------------------------------------------------------
 
@@ -262,17 +327,14 @@ class NumericModel:
 
     # -- code ------------------------------------------------------------------------------
 
-    def _library(self, group: str) -> codegen.NumpyLibrary | codegen.CLibrary:
+    def _library(self, group: str) -> codegen.KernelLibrary:
         """The compiled kernels of ``group`` (built on first use): "accessors" (all of
         :data:`kronlag.codegen.ACCESSOR_KERNELS`) or the single kernel of that name."""
         library = self._libraries.get(group)
         if library is None:
             names = codegen.ACCESSOR_KERNELS if group == "accessors" else (group,)
             kernels = [self._source.kernel(name) for name in names]
-            if self.backend == "c":
-                library = codegen.CLibrary(kernels, solver=group == "dynamics")
-            else:
-                library = codegen.NumpyLibrary(kernels)
+            library = codegen.BACKENDS[self.backend](kernels, m=self.m, n_parameters=len(self.parameter_names))
             self._libraries[group] = library
         return library
 
@@ -283,19 +345,45 @@ class NumericModel:
             raise AttributeError("c_source exists only for backend='c'")
         return self._dynamics.source
 
+    def _group(self, name: str) -> codegen.KernelLibrary:
+        return self._library("accessors" if name in codegen.ACCESSOR_KERNELS else name)
+
+    def _evaluator(self, name: str) -> Callable[..., np.ndarray]:
+        """``f(t, q, qd, p)`` -> matrix ``name`` in its public shape (built on first use)."""
+        evaluator = self._evaluators.get(name)
+        if evaluator is None:
+            library = self._group(name)
+            kernel = library.kernels[name]
+            shape = (kernel.size,) if name in _VECTOR_KERNELS or len(kernel.blocks) > 1 else kernel.blocks[0].shape
+            evaluator = self._evaluators[name] = library.evaluator(name, shape)
+        return evaluator
+
     def _evaluate(self, name: str, q, qd, t: float) -> np.ndarray:
-        q = self._vector(q, "q")
-        qd = self._vector(qd, "qd") if qd is not None else np.zeros(self.m)
-        library = self._library("accessors" if name in codegen.ACCESSOR_KERNELS else name)
-        flat = library.evaluate(name, t, q, qd, self.parameter_vector(t))
-        (block,) = library.kernels[name].blocks
-        return flat if name in _VECTOR_KERNELS else flat.reshape(block.shape)
+        parameters = self.parameter_vector(t) if self._time_varying else self._p
+        return self._evaluator(name)(t, q, qd, parameters)
 
     def _vector(self, value, what: str) -> np.ndarray:
         vector = np.asarray(value, dtype=float)
         if vector.shape != (self.m,):
             raise ValueError(f"{what} must have shape ({self.m},), got {vector.shape}")
         return vector
+
+    def _states(self, value, what: str) -> np.ndarray:
+        states = np.ascontiguousarray(value, dtype=float)
+        if states.ndim != 2 or states.shape[1] != self.m:
+            raise ValueError(f"{what} must have shape (N, {self.m}), got {states.shape}")
+        return states
+
+    def _batch_times(self, t, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(t, p)`` for a batch of ``n`` states: ``t`` 0-d or (n,), ``p`` (P,) or (n, P)."""
+        times = np.ascontiguousarray(t, dtype=float)
+        if times.shape not in ((), (n,)):
+            raise ValueError(f"t must be a number or have shape ({n},), got {times.shape}")
+        if not self._time_varying:
+            return times, self._p
+        if times.ndim == 0:
+            return times, self.parameter_vector(float(times))
+        return times, np.array([self.parameter_vector(time) for time in times]).reshape(n, len(self._p))
 
     # -- matrices --------------------------------------------------------------------------
 
@@ -367,9 +455,7 @@ class NumericModel:
             ``M`` (m, m), ``h = f_Q - C qd - g`` (m,), ``Phi`` (r,), ``Phi_q`` (r, m),
             ``gamma`` (r,), ``A`` (s, m), ``b`` (s,), ``gamma_nh`` (s,).
         """
-        q, qd = self._vector(q, "q"), self._vector(qd, "qd")
-        flat = self._dynamics.evaluate("dynamics", t, q, qd, self.parameter_vector(t))
-        return {name: flat[start:stop].reshape(shape) for name, start, stop, shape in self._terms_layout}
+        return split_terms(self._dynamics.kernels["dynamics"], self._evaluate("dynamics", q, qd, t))
 
     def forward_dynamics(self, q, qd, t: float = 0.0, *, alpha: float = 0.0,
                          beta: float = 0.0) -> ForwardDynamicsResult:
@@ -396,32 +482,83 @@ class NumericModel:
         SingularConfigurationError
             M is not positive definite on the null space of ``[Phi_q; A]``.
         """
-        m, r = self.m, self.r
-        if self.backend == "c":
-            for i, function in self._time_varying:
-                self._fd_in[3 + 2 * m + i] = function(t)
-            qdd, lam, mu, rank = self._fd_call(q, qd, t, alpha, beta)
-            if rank < 0:
-                raise SingularConfigurationError(q, qd, t)
-        else:
-            terms = self.dynamics_terms(q, qd, t)
-            qd = np.asarray(qd, dtype=float)
-            G = np.vstack([terms["Phi_q"], terms["A"]])
-            c = np.concatenate([terms["gamma"] - 2 * alpha * terms["Phi_q"] @ qd - beta ** 2 * terms["Phi"],
-                                terms["gamma_nh"] - alpha * (terms["A"] @ qd + terms["b"])])
-            solution = solve_augmented(terms["M"], terms["h"], G, c)
-            if solution is None:
-                raise SingularConfigurationError(q, qd, t)
-            qdd, nu, rank = solution
-            lam, mu = nu[:r], nu[r:]
-        unique = rank == r + self.s
+        parameters = self.parameter_vector(t) if self._time_varying else self._p
+        qdd, lam, mu, rank = self._forward(t, q, qd, parameters, alpha, beta)
+        if rank < 0:
+            raise SingularConfigurationError(q, qd, t)
+        unique = rank == self.r + self.s
         if not unique and not self._warned_redundant:
             self._warned_redundant = True
             warnings.warn(f"{self.equations.system.name}: the constraint Jacobian [Phi_q; A] has rank {rank} "
-                          f"< {r + self.s} (redundant constraints); the accelerations are unique, the "
+                          f"< {self.r + self.s} (redundant constraints); the accelerations are unique, the "
                           "multipliers returned are the minimum-norm ones", RedundantConstraintsWarning,
                           stacklevel=2)
         return ForwardDynamicsResult(qdd, lam, mu, unique, rank)
+
+    # -- many states at once ------------------------------------------------------------------
+
+    def forward_dynamics_batch(self, q, qd, t=0.0, *, alpha: float = 0.0, beta: float = 0.0
+                               ) -> ForwardDynamicsBatch:
+        """:meth:`forward_dynamics` at N states in one call (C: one call into the library, threaded).
+
+        Parameters
+        ----------
+        q, qd : (N, m)
+        t : float or (N,)
+        alpha, beta : float
+            Baumgarte stabilization, as in :meth:`forward_dynamics`.
+
+        Returns
+        -------
+        ForwardDynamicsBatch
+            ``qdd`` (N, m), ``lam`` (N, r), ``mu`` (N, s), ``rank`` (N,); a singular
+            state has rank -1 and NaN results (no exception: the other states stand).
+
+        Notes
+        -----
+        The C backend splits the states over ``$KRONLAG_THREADS`` threads (default:
+        the CPUs this process may use) and releases the GIL.
+        """
+        q, qd = self._states(q, "q"), self._states(qd, "qd")
+        if qd.shape != q.shape:
+            raise ValueError(f"qd must have the shape of q, {q.shape}, got {qd.shape}")
+        times, parameters = self._batch_times(t, len(q))
+        out, rank = self._dynamics.forward_dynamics_batch(times, q, qd, parameters, float(alpha), float(beta))
+        m, r = self.m, self.r
+        return ForwardDynamicsBatch(out[:, :m], out[:, m:m + r], out[:, m + r:], rank)
+
+    def evaluate_batch(self, name: str, q, qd=None, t=0.0) -> np.ndarray:
+        """Matrix ``name`` at N states in one call: ``model.evaluate_batch("M", q)[i] == model.M(q[i])``.
+
+        Parameters
+        ----------
+        name : str
+            One of :data:`BATCH_MATRICES`: ``"M"``, ``"g"``, ``"Phi"``, ``"Phi_q"``, ``"A"``, ``"b"``,
+            ``"f_Q"``, ``"gamma"``, ``"gamma_nh"``, ``"potential_energy"``, ``"C"``, ``"Cqd"``,
+            ``"C_christoffel"``.
+        q : (N, m)
+        qd : (N, m), needed by ``C``, ``C_christoffel``, ``Cqd``, ``f_Q``, ``gamma``, ``gamma_nh``
+        t : float or (N,)
+
+        Returns
+        -------
+        (N, *shape)
+            ``shape`` that of the single call (``(m, m)`` for ``M``, ``(m,)`` for ``g``, ``(1,)`` for
+            ``potential_energy``).
+        """
+        if name not in BATCH_MATRICES:
+            raise ValueError(f"unknown matrix {name!r}; choose from {', '.join(BATCH_MATRICES)}")
+        q = self._states(q, "q")
+        if qd is None and name in _SPEED_KERNELS:
+            raise ValueError(f"{name} depends on the speeds: give qd, shape (N, {self.m})")
+        qd = None if qd is None else self._states(qd, "qd")
+        if qd is not None and qd.shape != q.shape:
+            raise ValueError(f"qd must have the shape of q, {q.shape}, got {qd.shape}")
+        times, parameters = self._batch_times(t, len(q))
+        library = self._group(name)
+        flat = library.evaluate_batch(name, times, q, qd, parameters)
+        (block,) = library.kernels[name].blocks
+        return flat.reshape(len(q), *((block.size,) if name in _VECTOR_KERNELS else block.shape))
 
     def inverse_dynamics(self, q, qd, qdd, actuated: Sequence = ("q1",), t: float = 0.0, *,
                          rtol: float = 1e-8) -> InverseDynamicsResult:
