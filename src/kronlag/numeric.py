@@ -376,7 +376,7 @@ class NumericModel:
 
     def _batch_times(self, t, n: int) -> tuple[np.ndarray, np.ndarray]:
         """``(t, p)`` for a batch of ``n`` states: ``t`` 0-d or (n,), ``p`` (P,) or (n, P)."""
-        times = np.ascontiguousarray(t, dtype=float)
+        times = np.array(t, dtype=float)  # a copy, contiguous, 0-d for a number
         if times.shape not in ((), (n,)):
             raise ValueError(f"t must be a number or have shape ({n},), got {times.shape}")
         if not self._time_varying:
