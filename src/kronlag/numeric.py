@@ -141,11 +141,14 @@ class ForwardDynamicsBatch:
 
 
 def split_terms(kernel: codegen.Kernel, flat: np.ndarray) -> dict[str, np.ndarray]:
-    """The blocks of the ``"dynamics"`` kernel's flat output by name (``M``, ``h``, ``Phi``, ...), as views."""
+    """The blocks of the ``"dynamics"`` kernel's output by name (``M``, ``h``, ``Phi``, ...), as views.
+
+    ``flat`` is (size,) for one state or (N, size) for N states (the blocks then have a leading N).
+    """
     terms, start = {}, 0
     for block in kernel.blocks:
         shape = block.shape if block.name in _MATRIX_TERMS else (block.size,)
-        terms[block.name] = flat[start:start + block.size].reshape(shape)
+        terms[block.name] = flat[..., start:start + block.size].reshape(flat.shape[:-1] + shape)
         start += block.size
     return terms
 
@@ -607,6 +610,9 @@ class NumericModel:
                                     rtol: float = 1e-8) -> InverseDynamicsResult:
         """:meth:`inverse_dynamics` along a prescribed motion, time along the first axis.
 
+        All N states in one batched kernel call (see :meth:`forward_dynamics_batch`) and
+        stacked least squares (the pseudo-inverse, minimum norm).
+
         Parameters
         ----------
         t : (N,)
@@ -618,18 +624,35 @@ class NumericModel:
             ``forces`` (N, n_a), ``lam`` (N, r), ``mu`` (N, s); ``unique`` if unique at every time.
         """
         t = np.asarray(t, dtype=float)
-        arrays = [np.asarray(x, dtype=float) for x in (q, qd, qdd)]
-        for name, array in zip(("q", "qd", "qdd"), arrays):
+        if t.ndim != 1:
+            raise ValueError(f"t must have shape (N,), got {t.shape}")
+        q, qd, qdd = (self._states(x, name) for x, name in ((q, "q"), (qd, "qd"), (qdd, "qdd")))
+        for name, array in zip(("q", "qd", "qdd"), (q, qd, qdd)):
             if array.shape != (len(t), self.m):
                 raise ValueError(f"{name} must have shape ({len(t)}, {self.m}), got {array.shape}")
-        results = [self.inverse_dynamics(*state, actuated=actuated, t=time, rtol=rtol)
-                   for time, *state in zip(t, *arrays)]
-        n, r, s = len(actuated), self.r, self.s
-        return InverseDynamicsResult(
-            np.array([x.forces for x in results]).reshape(len(t), n),
-            np.array([x.lam for x in results]).reshape(len(t), r),
-            np.array([x.mu for x in results]).reshape(len(t), s),
-            all(x.unique for x in results))
+        columns = _names(list(actuated), self._coordinate_index, "actuated coordinate(s)")
+        times, parameters = self._batch_times(t, len(t))
+        kernel = self._dynamics.kernels["dynamics"]
+        terms = split_terms(kernel, self._dynamics.evaluate_batch(kernel.name, times, q, qd, parameters))
+        inertial = np.einsum("nij,nj->ni", terms["M"], qdd)
+        rhs = inertial - terms["h"]
+        selection = np.zeros((len(t), self.m, len(columns)))
+        selection[:, columns, range(len(columns))] = 1.0
+        system = np.concatenate([selection, -np.swapaxes(terms["Phi_q"], 1, 2), -np.swapaxes(terms["A"], 1, 2)],
+                                axis=2)
+        solution = np.einsum("nij,nj->ni", np.linalg.pinv(system), rhs)
+        residual = np.linalg.norm(np.einsum("nij,nj->ni", system, solution) - rhs, axis=1)
+        scale = np.maximum.reduce([np.linalg.norm(rhs, axis=1), np.linalg.norm(inertial, axis=1),
+                                   np.linalg.norm(terms["h"], axis=1), np.full(len(t), 1e-300)])
+        violated = np.flatnonzero(residual > rtol * scale)
+        if len(violated):
+            i = violated[0]
+            raise ValueError(f"the actuators {list(actuated)} cannot produce this motion at t = {t[i]:g} "
+                             f"(and {len(violated) - 1} other times): the equations of motion are violated "
+                             f"by {residual[i]:.3g} (relative {residual[i] / scale[i]:.3g})")
+        n, r = len(columns), self.r
+        unique = bool(np.all(np.linalg.matrix_rank(system) == system.shape[2])) if len(t) else True
+        return InverseDynamicsResult(solution[:, :n], solution[:, n:n + r], solution[:, n + r:], unique)
 
     # -- consistent initial conditions ---------------------------------------------------------
 
