@@ -90,8 +90,8 @@ RANK_RTOL = 1e-10
 CHOLESKY_RTOL = 1e-12
 
 #: Kernels that evaluate one public matrix each (``NumericModel.M`` etc.), compiled together.
-#: ``"C"``, ``"Cqd"`` and ``"C_christoffel"`` are kernels too, each compiled alone on first use:
-#: they are by far the largest and the simulation does not need them.
+#: ``"C"``, ``"Cqd"`` and ``"C_christoffel"`` are kernels too (see ``NumericModel`` for how
+#: they are grouped into libraries).
 ACCESSOR_KERNELS = ("M", "g", "Phi", "Phi_q", "A", "b", "f_Q", "gamma", "gamma_nh", "potential_energy")
 
 _CFLAGS = ("-O2", "-fno-math-errno", "-fPIC", "-pthread")

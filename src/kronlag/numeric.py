@@ -48,6 +48,11 @@ _VECTOR_KERNELS = frozenset({"g", "Phi", "b", "f_Q", "Cqd", "gamma", "gamma_nh",
 _SPEED_KERNELS = frozenset({"C", "C_christoffel", "Cqd", "f_Q", "gamma", "gamma_nh"})
 #: The matrices :meth:`NumericModel.evaluate_batch` evaluates.
 BATCH_MATRICES = (*codegen.ACCESSOR_KERNELS, "C", "Cqd", "C_christoffel")
+#: Kernels compiled into one library on first use of any of them (the ``"dynamics"`` kernel, with the
+#: solver, is built with the model): the accessors, and the two Coriolis matrices, by far the largest
+#: kernels, which the simulation does not need (one compile for both).
+_LIBRARY_GROUPS = {"accessors": (*codegen.ACCESSOR_KERNELS, "Cqd"), "coriolis": ("C", "C_christoffel")}
+_GROUP_OF = {kernel: group for group, kernels in _LIBRARY_GROUPS.items() for kernel in kernels}
 #: Former backend names, still accepted with a DeprecationWarning.
 _DEPRECATED_BACKENDS = {"numpy": "python"}
 #: The dynamics kernel's blocks that are matrices (the others are vectors).
@@ -257,8 +262,8 @@ class NumericModel:
     Notes
     -----
     The forward-dynamics kernel is generated and compiled here; the other
-    matrices on first use (``C``, ``Cqd`` and ``C_christoffel``, the largest,
-    each on its own).  Every call uses its own buffers: a model may be shared
+    matrices on first use (``C`` and ``C_christoffel``, the largest, together
+    apart from the rest).  Every call uses its own buffers: a model may be shared
     between threads.
     """
 
@@ -331,11 +336,11 @@ class NumericModel:
     # -- code ------------------------------------------------------------------------------
 
     def _library(self, group: str) -> codegen.KernelLibrary:
-        """The compiled kernels of ``group`` (built on first use): "accessors" (all of
-        :data:`kronlag.codegen.ACCESSOR_KERNELS`) or the single kernel of that name."""
+        """The compiled kernels of ``group`` (built on first use): one of :data:`_LIBRARY_GROUPS`
+        or the single kernel of that name."""
         library = self._libraries.get(group)
         if library is None:
-            names = codegen.ACCESSOR_KERNELS if group == "accessors" else (group,)
+            names = _LIBRARY_GROUPS.get(group, (group,))
             kernels = [self._source.kernel(name) for name in names]
             library = codegen.BACKENDS[self.backend](kernels, m=self.m, n_parameters=len(self.parameter_names))
             self._libraries[group] = library
@@ -349,7 +354,7 @@ class NumericModel:
         return self._dynamics.source
 
     def _group(self, name: str) -> codegen.KernelLibrary:
-        return self._library("accessors" if name in codegen.ACCESSOR_KERNELS else name)
+        return self._library(_GROUP_OF.get(name, name))
 
     def _evaluator(self, name: str) -> Callable[..., np.ndarray]:
         """``f(t, q, qd, p)`` -> matrix ``name`` in its public shape (built on first use)."""
