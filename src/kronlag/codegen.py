@@ -1013,17 +1013,17 @@ def compile_shared_library(source: str, *, parts: int = 1) -> Path:
         except OSError as error:
             raise CompilerError(f"cannot run the C compiler {compiler}: {error}") from None
         errors = [process.communicate()[1] for process in processes]
-        failed = [error for process, error in zip(processes, errors) if process.returncode]
+        failed = [f"exit status {process.returncode}\n{error[-4000:]}"
+                  for process, error in zip(processes, errors) if process.returncode]
         built = Path(work) / "model.so"
         if not failed:
             undefined = ["-undefined", "dynamic_lookup"] if sys.platform == "darwin" else []
             link = subprocess.run([compiler, "-shared", "-pthread", *undefined, "-o", str(built), *map(str, objects),
-                                   "-lm"],
-                                  capture_output=True, text=True)
-            failed = [link.stderr] if link.returncode else []
+                                   "-lm"], capture_output=True, text=True)
+            failed = [f"exit status {link.returncode} (linking)\n{link.stderr[-4000:]}"] if link.returncode else []
         if failed or not built.is_file():
-            output = failed[0][-4000:] if failed else "no library was written"
-            raise CompilerError(f"compiling the generated C code with {compiler} failed:\n{output}")
+            output = failed[0] if failed else "no library was written"
+            raise CompilerError(f"compiling the generated C code with {compiler} failed: {output}".rstrip())
         # the library first, its hash after: a library without a matching hash is never loaded
         digest = _digest(built)
         os.replace(built, target)
