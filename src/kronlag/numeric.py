@@ -367,8 +367,8 @@ class NumericModel:
         return evaluator
 
     def _evaluate(self, name: str, q, qd, t: float) -> np.ndarray:
-        parameters = self.parameter_vector(t) if self._time_varying else self._p
-        return self._evaluator(name)(t, q, qd, parameters)
+        evaluator = self._evaluators.get(name) or self._evaluator(name)
+        return evaluator(t, q, qd, self.parameter_vector(t) if self._time_varying else self._p)
 
     def _vector(self, value, what: str) -> np.ndarray:
         vector = np.asarray(value, dtype=float)
