@@ -244,6 +244,23 @@ def test_bench_forward_dynamics_smoke():
 
 
 @needs_compiler
+def test_bench_accessors_smoke():
+    pytest.importorskip("pinocchio")
+    process = subprocess.run([sys.executable, str(BENCH / "bench_accessors.py"), "--quick"],
+                             capture_output=True, text=True, timeout=300)
+    assert process.returncode == 0, process.stdout + process.stderr
+    assert "pinocchio crba" in process.stdout and "nonLinearEffects" in process.stdout
+
+
+@needs_compiler
+def test_bench_batch_smoke():
+    process = subprocess.run([sys.executable, str(BENCH / "bench_batch.py"), "--states", "2000"],
+                             capture_output=True, text=True, timeout=300)
+    assert process.returncode == 0, process.stdout + process.stderr
+    assert "batch speed-up over the loop" in process.stdout
+
+
+@needs_compiler
 def test_fast_call_layer_and_ctypes_fallback_agree(monkeypatch):
     fast = numeric("quick_return", "c")
     monkeypatch.setattr(codegen, "FAST_CALL", None)
