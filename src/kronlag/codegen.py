@@ -209,7 +209,7 @@ class _SymengineConverter:
             self.constants[symbol.name] = value
         return symbol
 
-    def matrix(self, matrix: sp.MatrixBase, name: str) -> list[list[se.Basic]]:
+    def matrix(self, matrix: sp.MatrixBase, name: str = "matrix") -> list[list[se.Basic]]:
         """The entries of ``matrix`` (called ``name`` in errors) converted."""
         return [[self.entry(matrix[i, j], f"{name}[{i}, {j}]") for j in range(matrix.cols)]
                 for i in range(matrix.rows)]
