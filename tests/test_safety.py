@@ -78,6 +78,16 @@ def test_world_writable_cache_directory_is_refused(tmp_path, monkeypatch):
 
 
 @needs_compiler
+def test_cache_directory_inside_a_world_writable_directory_is_refused(tmp_path, monkeypatch):
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    shared.chmod(0o777)  # no sticky bit: anyone may rename the cache away and put their own in its place
+    monkeypatch.setenv("KRONLAG_CACHE", str(shared / "cache"))
+    with pytest.raises(PermissionError, match=rf"inside {shared}, which everyone may write to"):
+        point_mass(1).numeric({"m1": 1.0}, backend="c")
+
+
+@needs_compiler
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="needs root to chown")
 def test_cache_directory_of_another_user_is_refused(tmp_path, monkeypatch):
     import pwd

@@ -465,6 +465,11 @@ def _private_cache_directory() -> Path:
     writers = [who for who, bit in (("its group", stat.S_IWGRP), ("others", stat.S_IWOTH)) if status.st_mode & bit]
     if writers:
         problems.append(f"writable by {' and '.join(writers)} (mode {stat.S_IMODE(status.st_mode):o})")
+    for parent in directory.resolve().parents:  # anyone could rename the directory away and plant another
+        mode = parent.stat().st_mode
+        if mode & stat.S_IWOTH and not mode & stat.S_ISVTX:
+            problems.append(f"inside {parent}, which everyone may write to "
+                            f"(mode {stat.S_IMODE(mode):o}, no sticky bit)")
     if problems:
         raise PermissionError(
             f"refusing to use the kronlag cache directory {directory}: it is {'; '.join(problems)}. Compiled "
