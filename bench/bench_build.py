@@ -50,7 +50,7 @@ def measure(n: int, angles: str, compare_cse: bool) -> dict:
     source = codegen.KernelSource(eom)
     kernel = source.kernel("dynamics")
     generated = time.perf_counter()
-    library = codegen.CLibrary([kernel], solver=True)
+    library = codegen.CLibrary([kernel], m=eom.shape[0], n_parameters=len(eom.parameters))
     compiled = time.perf_counter()
     result.update(codegen=generated - start, compile=compiled - generated, temporaries=len(kernel.temporaries),
                   source_kb=len(library.source) / 1024, parts=min(os.cpu_count() or 1, 8))

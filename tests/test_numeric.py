@@ -20,7 +20,7 @@ from kronlag.calculus import time_derivative
 
 MODELS = ["four_bar", "quick_return", "double_pendulum", "slider_crank", "heavy_top", "chaplygin_sleigh",
           "closed_chain_4_relative"]
-BACKENDS = ["numpy", "c"]
+BACKENDS = ["python", "c"]
 
 needs_compiler = pytest.mark.skipif(codegen.c_compiler() is None, reason="no C compiler")
 
@@ -96,7 +96,7 @@ def test_matrices_equal_sympy_values(name, backend):
 @pytest.mark.parametrize("name", MODELS)
 def test_c_backend_equals_numpy_backend(name):
     eom = derived(name)
-    c_model, numpy_model = numeric(name, "c"), numeric(name, "numpy")
+    c_model, numpy_model = numeric(name, "c"), numeric(name, "python")
     q, qd, t = random_state(eom, 3)
     for key, value in c_model.dynamics_terms(q, qd, t).items():
         np.testing.assert_allclose(value, numpy_model.dynamics_terms(q, qd, t)[key], rtol=1e-13, atol=1e-13)
@@ -110,11 +110,11 @@ def test_c_backend_equals_numpy_backend(name):
 
 
 def test_interface_attributes():
-    model = numeric("four_bar", "numpy")
+    model = numeric("four_bar", "python")
     assert (model.m, model.r, model.s) == (3, 2, 0)
     assert model.coordinate_names == ("q1", "q2", "q3")
     assert model.equations is derived("four_bar")
-    assert model.backend == "numpy" and model.time_varying is False
+    assert model.backend == "python" and model.time_varying is False
     assert model.parameter_names == tuple(p.name for p in derived("four_bar").parameters)
     np.testing.assert_array_equal(model.parameter_vector(0.0),
                                   [parameter_values("four_bar")[n] for n in model.parameter_names])
@@ -127,7 +127,7 @@ def test_interface_attributes():
 def test_missing_parameters_are_all_listed():
     eom = derived("four_bar")
     with pytest.raises(ValueError) as error:
-        eom.numeric({"l1": 1.0, "m2": 1.0}, backend="numpy")
+        eom.numeric({"l1": 1.0, "m2": 1.0}, backend="python")
     message = str(error.value)
     for name in ("l2", "l3", "l4", "m1", "m3", "I1", "I2", "I3", "g", "tau"):
         assert name in message
@@ -138,19 +138,19 @@ def test_unknown_and_invalid_parameters():
     eom = derived("double_pendulum")
     values = dict.fromkeys(("l1", "l2", "m1", "m2", "I1", "I2", "g"), 1.0)
     with pytest.raises(ValueError, match="unknown parameter.*'tau'"):
-        eom.numeric({**values, "tau": 1.0}, backend="numpy")
+        eom.numeric({**values, "tau": 1.0}, backend="python")
     with pytest.raises(ValueError, match="expected a number"):
-        eom.numeric({**values, "g": "heavy"}, backend="numpy")
+        eom.numeric({**values, "g": "heavy"}, backend="python")
     with pytest.raises(ValueError, match="backend"):
         eom.numeric(values, backend="fortran")
-    by_symbol = eom.numeric({sp.Symbol(name): value for name, value in values.items()}, backend="numpy")
+    by_symbol = eom.numeric({sp.Symbol(name): value for name, value in values.items()}, backend="python")
     np.testing.assert_array_equal(by_symbol.parameter_vector(), np.ones(7))
 
 
 def test_time_varying_parameter_must_not_enter_mass_matrix_or_constraints():
     values = parameter_values("four_bar")
     with pytest.raises(ValueError, match="l2 enter M or the constraints"):
-        derived("four_bar").numeric({**values, "l2": lambda t: 1 + t}, backend="numpy")
+        derived("four_bar").numeric({**values, "l2": lambda t: 1 + t}, backend="python")
 
 
 @pytest.mark.parametrize("backend", backend_params())
@@ -220,7 +220,7 @@ def test_unsupported_function_is_a_clear_error():
     system.add_body(kronlag.PointMass("p", mass=1, position=(q1, 0)))
     system.add_potential(sp.Function("mystery")(q1))
     with pytest.raises((NotImplementedError, ValueError), match="mystery"):
-        kronlag.derive(system).numeric({}, backend="numpy").g([0.0])
+        kronlag.derive(system).numeric({}, backend="python").g([0.0])
 
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"
@@ -244,26 +244,44 @@ def test_bench_forward_dynamics_smoke():
 
 
 @needs_compiler
-def test_fast_call_extension_and_ctypes_fallback_agree(monkeypatch):
-    import sysconfig
+def test_bench_accessors_smoke():
+    pytest.importorskip("pinocchio")
+    process = subprocess.run([sys.executable, str(BENCH / "bench_accessors.py"), "--quick"],
+                             capture_output=True, text=True, timeout=300)
+    assert process.returncode == 0, process.stdout + process.stderr
+    assert "pinocchio crba" in process.stdout and "nonLinearEffects" in process.stdout
 
-    if (Path(sysconfig.get_paths()["include"]) / "Python.h").exists():
-        assert codegen.call_extension() is not None
+
+@needs_compiler
+def test_bench_batch_smoke():
+    process = subprocess.run([sys.executable, str(BENCH / "bench_batch.py"), "--states", "2000"],
+                             capture_output=True, text=True, timeout=300)
+    assert process.returncode == 0, process.stdout + process.stderr
+    assert "batch speed-up over the loop" in process.stdout
+
+
+@needs_compiler
+def test_fast_call_layer_and_ctypes_fallback_agree(monkeypatch):
     fast = numeric("quick_return", "c")
-    monkeypatch.setattr(codegen, "call_extension", lambda: None)
+    monkeypatch.setattr(codegen, "FAST_CALL", None)
     fallback = derived("quick_return").numeric(parameter_values("quick_return"), backend="c")
+    reference = numeric("quick_return", "python")
     q, qd, t = random_state(fast.equations, 6)
+    expected = reference.forward_dynamics(q, qd, t, alpha=1.0, beta=2.0)
     for model in (fast, fallback):
         result = model.forward_dynamics(list(q), list(qd), t, alpha=1.0, beta=2.0)
-        expected = numeric("quick_return", "numpy").forward_dynamics(q, qd, t, alpha=1.0, beta=2.0)
         np.testing.assert_allclose(result.qdd, expected.qdd, rtol=1e-9)
         np.testing.assert_allclose(result.lam, expected.lam, rtol=1e-9)
         assert result.qdd.dtype == np.float64 and result.mu.shape == (0,)
-        with pytest.raises(ValueError):
+        np.testing.assert_allclose(model.M(tuple(q), t), reference.M(q, t), rtol=1e-12)
+        np.testing.assert_allclose(model.Cqd(q[::-1][::-1], qd, t), reference.Cqd(q, qd, t), rtol=1e-12)
+        with pytest.raises(ValueError, match=r"q must have shape \(3,\)"):
             model.forward_dynamics(q[:2], qd)
+        with pytest.raises(ValueError, match=r"qd must have shape \(3,\)"):
+            model.Cqd(q, np.zeros((3, 1)))
 
 
-@pytest.mark.parametrize("backend", ["numpy", "c"])
+@pytest.mark.parametrize("backend", ["python", "c"])
 def test_single_coordinate_model_keeps_matrix_shapes(backend):
     """A simple pendulum in one coordinate: M is 1 x 1 and qdd = -g/l sin q."""
     angle, = kronlag.coordinates("q")

@@ -12,6 +12,7 @@ from .equations import Equations
 from .modelfile import load_model
 from .numeric import (
     AssemblyError,
+    ForwardDynamicsBatch,
     ForwardDynamicsResult,
     InverseDynamicsResult,
     NumericModel,
@@ -55,6 +56,7 @@ __all__ = [
     "t",
     "NumericModel",
     "ForwardDynamicsResult",
+    "ForwardDynamicsBatch",
     "InverseDynamicsResult",
     "SingularConfigurationError",
     "AssemblyError",

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .derivation import derive
-from .export import FORMATS, LANGUAGES, export_code, format_equations
+from .export import FORMATS, LANGUAGES, export_code, file_stem, format_equations
 from .modelfile import example_names, example_path, load_model, resolve_model
 from .models import BUILTIN_MODELS
 from .system import ModelError
@@ -122,7 +122,7 @@ def _simulate(arguments: argparse.Namespace) -> None:
     bar.close()
     print(summarize(trajectory).report())
     if not trajectory.success:
-        saved = output or Path(f"{model.system.name}-partial.npz")
+        saved = output or Path(f"{file_stem(model.system.name)}-partial.npz")
         _save_trajectory(trajectory, saved)
         reached = trajectory.t[-1] if len(trajectory.t) else 0.0
         raise NumericalFailure(f"simulation failed ({trajectory.message.rstrip('.')}); "
@@ -160,7 +160,7 @@ def _inverse(arguments: argparse.Namespace) -> None:
     run = inverse_dynamics_along(model, drives, np.linspace(0.0, t_end, arguments.points))
     print(run.report())
     if not run.success:
-        saved = output or Path(f"{model.system.name}-inverse-partial.csv")
+        saved = output or Path(f"{file_stem(model.system.name)}-inverse-partial.csv")
         run.save(saved)
         raise NumericalFailure(f"inverse dynamics failed {run.message}; the results before are saved in {saved}")
     if output:

@@ -9,14 +9,21 @@ subexpressions are converted once), common-subexpression elimination with
 ``symengine.cse``, inputs renamed to ``t``, ``q[i]``, ``qd[i]``, ``p[i]``.
 The two backends only print the result:
 
-* ``"numpy"``: a Python function (our own generated source, compiled with
-  :func:`compile`) of plain floats using :mod:`math`; no compiler needed;
-* ``"c"``: C compiled with the machine's C compiler (``-O2``) into a shared
-  library, cached on disk under ``$KRONLAG_CACHE`` or ``~/.cache/kronlag``
-  (keyed by a hash of the source and the flags) and called through
-  :mod:`ctypes` (forward dynamics through a small CPython extension).  Large kernels are split into functions of
+* ``"python"`` (:class:`PythonLibrary`): Python functions (our own generated
+  source, compiled with :func:`compile`) run on floats with :mod:`math` for one
+  state, on NumPy arrays for a batch of states; no compiler needed;
+* ``"c"`` (:class:`CLibrary`): C compiled with the machine's C compiler
+  (``-O2``) into a shared library, cached on disk under ``$KRONLAG_CACHE`` or
+  ``~/.cache/kronlag`` (a private directory; keyed by a hash of the source and
+  the flags, content hash checked before loading), loaded with :mod:`ctypes`
+  and called through the fixed call layer ``kronlag._call`` built at install
+  time (ctypes when it is missing).  Large kernels are split into functions of
   :data:`C_CHUNK` statements (compilers are superlinear in the size of a
   function) and the source is compiled in parallel parts.
+
+Both implement :class:`KernelLibrary`; :data:`BACKENDS` maps the backend names
+to them.  Numbers reach the code as exact small integers and fractions or as
+correctly rounded floating-point literals (see :class:`_SymengineConverter`).
 
 The ``"dynamics"`` kernel holds everything forward dynamics needs, with one
 common-subexpression elimination over all of it::
@@ -28,7 +35,7 @@ with ``gamma = -(dPhi_q/dt) qd`` and ``gamma_nh = -(dA/dt) qd - db/dt``, the
 time derivatives taken by Theorem 1 (``dX/dt = dX/dq (I ⊗ qd)``, written as
 the sparse sum ``sum_k dX/dq_k qd_k``; the constraints do not depend on ``t``).
 The C library of the dynamics kernel also contains the solver of the augmented
-system (``kronlag_forward_dynamics``, see :data:`C_SOLVER`).
+system (``kronlag_forward_dynamics``, ``src/kronlag/c/augmented.c``).
 """
 
 from __future__ import annotations
@@ -36,20 +43,18 @@ from __future__ import annotations
 import ctypes
 import functools
 import hashlib
-import importlib.machinery
-import importlib.util
 import math
 import os
 import re
 import shutil
+import stat
 import subprocess
 import sys
-import sysconfig
 import tempfile
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import symengine as se
@@ -60,18 +65,24 @@ from .tolerances import RANK_RTOL, c_macros
 if TYPE_CHECKING:
     from .equations import Equations
 
+from .system import ModelError
+
 __all__ = [
     "Block",
     "Kernel",
     "KernelSource",
-    "NumpyLibrary",
+    "KernelLibrary",
+    "PythonLibrary",
     "CLibrary",
+    "BACKENDS",
+    "FAST_CALL",
     "ACCESSOR_KERNELS",
     "LAYOUTS",
     "layout",
     "layout_macros",
     "c_compiler",
     "cache_directory",
+    "CompilerError",
 ]
 
 #: The blocks of the kernels read by the C solvers and integrators, in output order:
@@ -122,12 +133,19 @@ def c_file(name: str) -> str:
     return (C_DIRECTORY / name).read_text()
 
 
+def solver_header(m: int, r: int, s: int, rank_rtol: float) -> str:
+    """The macros the C solvers and integrators read: dimensions, block offsets
+    (:func:`layout_macros`) and the numerical policy (:func:`kronlag.tolerances.c_macros`)."""
+    return (f"#define KRONLAG_M {m}\n#define KRONLAG_R {r}\n#define KRONLAG_S {s}\n#define KRONLAG_K {r + s}\n"
+            + layout_macros("dynamics", m, r, s) + layout_macros("tangent", m, r, s) + c_macros(rank_rtol))
+
+
 #: Kernels that evaluate one public matrix each (``NumericModel.M`` etc.), compiled together.
-#: ``"C"``, ``"Cqd"`` and ``"C_christoffel"`` are kernels too, each compiled alone on first use:
-#: they are by far the largest and the simulation does not need them.
+#: ``"C"``, ``"Cqd"`` and ``"C_christoffel"`` are kernels too (see ``NumericModel`` for how
+#: they are grouped into libraries).
 ACCESSOR_KERNELS = ("M", "g", "Phi", "Phi_q", "A", "b", "f_Q", "gamma", "gamma_nh", "potential_energy")
 
-_CFLAGS = ("-O2", "-fno-math-errno", "-fPIC")
+_CFLAGS = ("-O2", "-fno-math-errno", "-fPIC", "-pthread")
 
 
 @dataclass(frozen=True)
@@ -147,27 +165,53 @@ class Kernel:
     """A kernel after common-subexpression elimination, ready to print.
 
     ``temporaries`` are ``(symbol, expression)`` pairs in evaluation order;
-    ``outputs`` are the entries of all ``blocks``, row-major, concatenated.
+    ``outputs`` are the entries of all ``blocks``, row-major, concatenated;
+    ``constants`` maps the placeholder symbols ``K<i>`` standing for numbers
+    that are not small exact integers or fractions to their double values
+    (printed as correctly rounded floating-point literals, see :func:`literal`).
     """
 
     name: str
     blocks: tuple[Block, ...]
     temporaries: tuple[tuple[se.Symbol, se.Basic], ...]
     outputs: tuple[se.Basic, ...]
+    constants: dict[str, float] = field(default_factory=dict)
 
     @property
     def size(self) -> int:
         return sum(block.size for block in self.blocks)
 
 
+#: Integers and the numerators and denominators of fractions up to this size are exact doubles:
+#: they stay exact in SymEngine and print as C/Python numbers that the compiler reads exactly.
+_EXACT_LIMIT = 2**53
+
+_PLACEHOLDER = re.compile(r"\bK\d+\b")
+
+
+def literal(value: float) -> str:
+    """``value`` as a floating-point literal read back exactly (shortest round trip), parenthesized if negative."""
+    text = repr(float(value))
+    return f"({text})" if value < 0 else text
+
+
 class _SymengineConverter:
     """SymPy -> SymEngine, memoized; inputs renamed to ``t``, ``q[i]``, ``qd[i]``, ``p[i]``.
 
-    Floats become exact rationals (SymEngine prints floats with 15 digits).
+    Numbers: integers and fractions whose parts are at most 2**53 stay exact
+    (they print as ``3`` or ``1.0/3.0``, exact doubles divided once, so correctly
+    rounded); floats become such fractions when they can.  Every other real
+    number (``10**20``, ``2**64``, ``1e-300``, ``1/3`` of huge parts) becomes a
+    placeholder symbol ``K<i>`` whose value, ``float(number)`` (correctly
+    rounded), is kept in :attr:`constants` and printed as a literal: an integer
+    literal never reaches C, where a large one would overflow.  Complex and
+    non-finite numbers are a :class:`~kronlag.system.ModelError`.
     """
 
     def __init__(self, renames: dict[sp.Symbol, se.Symbol]):
         self.memo: dict = dict(renames)
+        self.constants: dict[str, float] = {}
+        self._placeholders: dict[float, se.Symbol] = {}
 
     def __call__(self, expr: sp.Basic) -> se.Basic:
         result = self.memo.get(expr)
@@ -177,8 +221,8 @@ class _SymengineConverter:
         return result
 
     def _build(self, expr: sp.Basic) -> se.Basic:
-        if isinstance(expr, sp.Float):
-            return se.Rational(*(int(x) for x in float(expr).as_integer_ratio()))
+        if expr.is_Number or expr in (sp.I, sp.zoo):
+            return self._number(expr)
         if isinstance(expr, sp.Symbol):
             raise ValueError(f"symbol {expr} is neither a coordinate, a speed, a parameter nor t")
         if not expr.args:
@@ -195,8 +239,38 @@ class _SymengineConverter:
             raise NotImplementedError(f"cannot generate code for {type(expr).__name__}: {expr}")
         return function(*args)
 
-    def matrix(self, matrix: sp.MatrixBase) -> list[list[se.Basic]]:
-        return [[self(matrix[i, j]) for j in range(matrix.cols)] for i in range(matrix.rows)]
+    def _number(self, number: sp.Basic) -> se.Basic:
+        if number.is_extended_real is False or number is sp.zoo:
+            raise ModelError(f"the complex constant {number} has no numeric value in real arithmetic")
+        if not number.is_finite:
+            raise ModelError(f"the non-finite constant {number} has no numeric value")
+        if number.is_Float:
+            value = float(number)
+            if not math.isfinite(value):
+                raise ModelError(f"the constant {number} overflows a double")
+            number = sp.Rational(*value.as_integer_ratio())
+        if max(abs(number.p), number.q) <= _EXACT_LIMIT:
+            return se.Rational(int(number.p), int(number.q))
+        value = float(number)  # correctly rounded: SymPy divides Python integers
+        if not math.isfinite(value):
+            raise ModelError(f"the constant {number} overflows a double")
+        symbol = self._placeholders.get(value)
+        if symbol is None:
+            symbol = self._placeholders[value] = se.Symbol(f"K{len(self._placeholders)}")
+            self.constants[symbol.name] = value
+        return symbol
+
+    def matrix(self, matrix: sp.MatrixBase, name: str = "matrix") -> list[list[se.Basic]]:
+        """The entries of ``matrix`` (called ``name`` in errors) converted."""
+        return [[self.entry(matrix[i, j], f"{name}[{i}, {j}]") for j in range(matrix.cols)]
+                for i in range(matrix.rows)]
+
+    def entry(self, expr: sp.Basic, where: str) -> se.Basic:
+        """``expr`` converted; a :class:`ModelError` names ``where`` it stands."""
+        try:
+            return self(expr)
+        except ModelError as error:
+            raise ModelError(f"{where} = {expr}: {error}") from None
 
 
 class KernelSource:
@@ -234,9 +308,9 @@ class KernelSource:
     def _compute(self, name: str) -> list[list[se.Basic]]:
         eq = self.equations
         if name in ("M", "C", "Cqd", "C_christoffel", "g", "Phi", "Phi_q", "A", "b", "f_Q", "gamma", "gamma_nh"):
-            return self.convert.matrix(getattr(eq, name))
+            return self.convert.matrix(getattr(eq, name), name)
         if name == "potential_energy":
-            return [[self.convert(sp.sympify(eq.potential_energy))]]
+            return [[self.convert.entry(sp.sympify(eq.potential_energy), "potential energy")]]
         if name == "h":
             return [[f[0] - c[0] - g[0]] for f, c, g in
                     zip(self.matrix("f_Q"), self.matrix("Cqd"), self.matrix("g"))]
@@ -267,52 +341,154 @@ class KernelSource:
                        for block, rows in zip(names, matrices))
         flat = [entry for rows in matrices for row in rows for entry in row]
         temporaries, outputs = se.cse(flat) if flat else ([], [])
-        return Kernel(name, blocks, tuple(temporaries), tuple(outputs))
+        return Kernel(name, blocks, tuple(temporaries), tuple(outputs), dict(self.convert.constants))
 
     def _columns(self, name: str) -> int:
         return self.m if name in ("M", "C", "C_christoffel", "Phi_q", "A", "K", "D") else 1
 
 
-# -- NumPy backend -----------------------------------------------------------------------
+# -- Python backend ---------------------------------------------------------------------
 
-_PYTHON_NAMESPACE: dict[str, object] = {
-    name: getattr(math, name) for name in (
-        "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "asinh",
-        "acosh", "atanh", "exp", "log", "sqrt", "floor", "pi", "e")
-}
-_PYTHON_NAMESPACE.update(E=math.e, ceiling=math.ceil, sign=lambda x: math.copysign(1.0, x) if x else 0.0)
+def _maximum(*values):
+    return functools.reduce(np.maximum, values)
+
+
+def _minimum(*values):
+    return functools.reduce(np.minimum, values)
+
+
+#: The generated Python source runs in one of two namespaces: :mod:`math` on floats (one
+#: state: fastest in pure Python), or NumPy on arrays (many states at once, vectorised).
+_FUNCTION_NAMES = ("sin", "cos", "tan", "sinh", "cosh", "tanh", "exp", "log", "sqrt", "floor", "pi", "e")
+_SCALAR_NAMESPACE: dict[str, object] = {name: getattr(math, name) for name in _FUNCTION_NAMES}
+_SCALAR_NAMESPACE.update({name: getattr(math, name) for name in ("asin", "acos", "atan", "atan2", "asinh",
+                                                                 "acosh", "atanh")},
+                         E=math.e, ceiling=math.ceil, abs=abs, max=max, min=min,
+                         sign=lambda x: math.copysign(1.0, x) if x else 0.0)
+_ARRAY_NAMESPACE: dict[str, object] = {name: getattr(np, name) for name in _FUNCTION_NAMES}
+_ARRAY_NAMESPACE.update(asin=np.arcsin, acos=np.arccos, atan=np.arctan, atan2=np.arctan2, asinh=np.arcsinh,
+                        acosh=np.arccosh, atanh=np.arctanh, E=np.e, ceiling=np.ceil, abs=np.abs,
+                        max=_maximum, min=_minimum, sign=np.sign)
+
+
+def dynamics_shape(kernel: Kernel) -> tuple[int, int, int]:
+    """``(m, r, s)`` from the blocks of the ``"dynamics"`` kernel (M, h, Phi, Phi_q, gamma, A, b, gamma_nh)."""
+    return tuple(kernel.blocks[i].shape[0] for i in (0, 2, 6))
 
 
 def python_source(kernel: Kernel) -> str:
-    """Python source of ``kernel_<name>(t, q, qd, p) -> list[float]`` (q, qd, p: lists)."""
+    """Python source of ``kernel_<name>(t, q, qd, p) -> list``: ``q[i]``, ``qd[i]``, ``p[i]`` and ``t``
+    may be floats (one state) or equally shaped arrays (many states, the NumPy namespace)."""
+    def code(expr: se.Basic) -> str:
+        return _PLACEHOLDER.sub(lambda match: literal(kernel.constants[match.group(0)]), str(expr))
+
     lines = [f"def kernel_{kernel.name}(t, q, qd, p):"]
-    lines += [f"    {symbol} = {expr}" for symbol, expr in kernel.temporaries]
-    lines.append("    return [" + ", ".join(str(expr) for expr in kernel.outputs) + "]")
+    lines += [f"    {symbol} = {code(expr)}" for symbol, expr in kernel.temporaries]
+    lines.append("    return [" + ", ".join(code(expr) for expr in kernel.outputs) + "]")
     return "\n".join(lines) + "\n"
 
 
-class NumpyLibrary:
-    """Kernels compiled to Python functions of floats.
+def _vector(value, n: int, what: str) -> np.ndarray:
+    """``value`` as a float64 vector of length ``n``; ValueError naming ``what`` otherwise."""
+    vector = np.ascontiguousarray(value, dtype=float)
+    if vector.shape != (n,):
+        raise ValueError(f"{what} must have shape ({n},), got {vector.shape}")
+    return vector
 
-    ``evaluate(name, t, q, qd, p)`` returns the flat float64 output of kernel ``name``.
+
+class KernelLibrary(Protocol):
+    """What :class:`~kronlag.numeric.NumericModel` needs from a backend (see :data:`BACKENDS`).
+
+    Inputs: ``t`` float, ``q``/``qd`` (m,), ``p`` (P,); batched: ``t`` (N,), ``q``/``qd`` (N, m),
+    ``p`` (N, P) or (P,) for all states.
     """
 
-    def __init__(self, kernels: Sequence[Kernel]):
+    kernels: dict[str, Kernel]
+    source: str
+
+    def evaluator(self, name: str, shape: tuple[int, ...]) -> Callable[..., np.ndarray]:
+        """``f(t, q, qd, p)`` -> the output of kernel ``name`` shaped ``shape`` (``qd`` may be None)."""
+
+    def evaluate_batch(self, name: str, t: np.ndarray, q: np.ndarray, qd: np.ndarray | None,
+                       p: np.ndarray) -> np.ndarray:
+        """(N, size): the flat output of kernel ``name`` at every state."""
+
+    def forward_dynamics_function(self) -> Callable[..., tuple]:
+        """``f(t, q, qd, p, alpha, beta) -> (qdd, lam, mu, rank)``, all None but rank (-1) if singular."""
+
+    def forward_dynamics_batch(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, p: np.ndarray,
+                               alpha: float, beta: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(out (N, m + r + s) = [qdd, lam, mu], rank (N,))``; rank -1 marks a singular state."""
+
+
+class PythonLibrary:
+    """Kernels as generated Python functions, no compiler needed (:class:`KernelLibrary`).
+
+    One state runs on floats with :mod:`math`; a batch of states runs the same
+    source on NumPy arrays, vectorised over the states.  Forward dynamics solves
+    the output of the ``"dynamics"`` kernel with
+    :func:`kronlag.numeric.solve_dynamics_terms`.
+    """
+
+    def __init__(self, kernels: Sequence[Kernel], *, m: int, n_parameters: int, rank_rtol: float = RANK_RTOL):
         self.kernels = {kernel.name: kernel for kernel in kernels}
+        self.m, self.n_parameters, self.rank_rtol = m, n_parameters, rank_rtol
         self.source = "\n\n".join(python_source(kernel) for kernel in kernels)
-        namespace = dict(_PYTHON_NAMESPACE)
         code = compile(self.source, "<kronlag generated>", "exec")
         unknown = sorted({name for const in code.co_consts if hasattr(const, "co_names")
-                          for name in const.co_names} - set(namespace) - {"abs", "max", "min"})
+                          for name in const.co_names} - set(_SCALAR_NAMESPACE))
         if unknown:
             raise NotImplementedError(f"no numeric implementation of the function(s) {', '.join(unknown)}")
-        exec(code, namespace)  # our own generated source, never user text
-        self.functions: dict[str, Callable] = {name: namespace[f"kernel_{name}"] for name in self.kernels}
+        self.scalar: dict[str, Callable] = {}
+        self.vectorised: dict[str, Callable] = {}
+        for functions, namespace in ((self.scalar, _SCALAR_NAMESPACE), (self.vectorised, _ARRAY_NAMESPACE)):
+            namespace = dict(namespace, __builtins__={})
+            exec(code, namespace)  # our own generated source, never user text
+            functions.update({name: namespace[f"kernel_{name}"] for name in self.kernels})
 
-    def evaluate(self, name: str, t: float, q: np.ndarray, qd: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """Flat output of kernel ``name`` (its blocks row-major, concatenated)."""
-        values = self.functions[name](t, q.tolist(), qd.tolist(), p.tolist())
-        return np.array(values, dtype=float)
+    def evaluator(self, name: str, shape: tuple[int, ...]) -> Callable[..., np.ndarray]:
+        return functools.partial(self._evaluate, self.scalar[name], shape)
+
+    def _evaluate(self, function: Callable, shape: tuple[int, ...], t: float, q, qd, p: np.ndarray) -> np.ndarray:
+        q = _vector(q, self.m, "q").tolist()
+        qd = [0.0] * self.m if qd is None else _vector(qd, self.m, "qd").tolist()
+        return np.array(function(float(t), q, qd, p.tolist()), dtype=float).reshape(shape)
+
+    def evaluate_batch(self, name: str, t: np.ndarray, q: np.ndarray, qd: np.ndarray | None,
+                       p: np.ndarray) -> np.ndarray:
+        n = len(q)
+        qd = np.zeros_like(q) if qd is None else qd
+        parameters = p.T if p.ndim == 2 else p
+        values = self.vectorised[name](t, q.T, qd.T, parameters)
+        out = np.empty((self.kernels[name].size, n))
+        for row, value in zip(out, values):
+            row[...] = value
+        return out.T.copy()
+
+    def forward_dynamics_function(self) -> Callable[..., tuple]:
+        return self._forward_dynamics
+
+    def _forward_dynamics(self, t: float, q, qd, p: np.ndarray, alpha: float, beta: float) -> tuple:
+        from .numeric import solve_dynamics_terms  # numeric builds on this module
+
+        qd = _vector(qd, self.m, "qd")
+        kernel = self.kernels["dynamics"]
+        return solve_dynamics_terms(kernel, self._evaluate(self.scalar[kernel.name], (kernel.size,), t, q, qd, p),
+                                    qd, alpha, beta, rank_rtol=self.rank_rtol)
+
+    def forward_dynamics_batch(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, p: np.ndarray,
+                               alpha: float, beta: float) -> tuple[np.ndarray, np.ndarray]:
+        from .numeric import solve_dynamics_terms  # numeric builds on this module
+
+        kernel = self.kernels["dynamics"]
+        terms = self.evaluate_batch(kernel.name, t, q, qd, p)
+        out = np.full((len(q), sum(dynamics_shape(kernel))), np.nan)
+        ranks = np.empty(len(q), dtype=np.int32)
+        for i, (row, velocity) in enumerate(zip(terms, qd)):
+            qdd, lam, mu, ranks[i] = solve_dynamics_terms(kernel, row, velocity, alpha, beta, rank_rtol=self.rank_rtol)
+            if ranks[i] >= 0:
+                out[i] = np.concatenate([qdd, lam, mu])
+        return out, ranks
 
 
 # -- C backend ----------------------------------------------------------------------------
@@ -325,9 +501,71 @@ def c_compiler() -> str | None:
     return None
 
 
+class CompilerError(RuntimeError):
+    """The C compiler is missing or failed on the generated code (the message has its output)."""
+
+
 def cache_directory() -> Path:
-    """Where compiled libraries are cached: ``$KRONLAG_CACHE`` or ``~/.cache/kronlag``."""
+    """Where compiled libraries are cached: ``$KRONLAG_CACHE`` or ``~/.cache/kronlag``.
+
+    :func:`compile_shared_library` creates it with mode 0700 and refuses to use it
+    (PermissionError) unless it belongs to the user and no one else can write to it.
+    """
     return Path(os.environ.get("KRONLAG_CACHE") or Path.home() / ".cache" / "kronlag")
+
+
+def _private_cache_directory() -> Path:
+    """:func:`cache_directory`, created 0700; PermissionError naming it unless it is the user's alone.
+
+    A library there is loaded into the process: a directory another user can
+    write to would let that user run code as whoever runs kronlag.
+    """
+    directory = cache_directory()
+    directory.mkdir(mode=0o700, parents=True, exist_ok=True)
+    status = directory.stat()
+    problems = []
+    if not stat.S_ISDIR(status.st_mode):
+        problems.append("not a directory")
+    if hasattr(os, "geteuid") and status.st_uid != os.geteuid():
+        problems.append(f"owned by uid {status.st_uid}, not by you (uid {os.geteuid()})")
+    writers = [who for who, bit in (("its group", stat.S_IWGRP), ("others", stat.S_IWOTH)) if status.st_mode & bit]
+    if writers:
+        problems.append(f"writable by {' and '.join(writers)} (mode {stat.S_IMODE(status.st_mode):o})")
+    for parent in directory.resolve().parents:  # anyone could rename the directory away and plant another
+        mode = parent.stat().st_mode
+        if mode & stat.S_IWOTH and not mode & stat.S_ISVTX:
+            problems.append(f"inside {parent}, which everyone may write to "
+                            f"(mode {stat.S_IMODE(mode):o}, no sticky bit)")
+    if problems:
+        raise PermissionError(
+            f"refusing to use the kronlag cache directory {directory}: it is {'; '.join(problems)}. Compiled "
+            "code loaded from there runs in this process, so it must be yours alone: run "
+            f"`chmod 700 {directory}` if it is yours, or point $KRONLAG_CACHE to a private directory")
+    return directory
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _digest_path(library: Path) -> Path:
+    """The sidecar recording the SHA-256 of ``library``, written after the library."""
+    return library.with_name(library.name + ".sha256")
+
+
+def _intact(library: Path) -> bool:
+    """Whether ``library`` exists with the content hash recorded when it was built."""
+    try:
+        return _digest_path(library).read_text().strip() == _digest(library)
+    except OSError:
+        return False
+
+
+def _write_atomically(target: Path, data: bytes, work: Path) -> None:
+    """Write ``data`` to ``target`` through a file in ``work`` renamed over it (readers never see a part)."""
+    temporary = work / (target.name + ".part")
+    temporary.write_bytes(data)
+    os.replace(temporary, target)
 
 
 _C_PREAMBLE = """\
@@ -366,8 +604,10 @@ def c_kernel(kernel: Kernel, first_chunk: int) -> tuple[str, int]:
     index = {symbol.name: i for i, (symbol, _) in enumerate(kernel.temporaries)}
 
     def code(expr: se.Basic) -> str:
-        # the temporaries of symengine.cse print as x<digits>; no input is named so
-        return _TEMPORARY.sub(lambda match: f"w[{index[match.group(0)]}]", se.ccode(expr))
+        # the temporaries of symengine.cse print as x<digits>, the constants as K<digits>;
+        # no input is named so
+        text = _TEMPORARY.sub(lambda match: f"w[{index[match.group(0)]}]", se.ccode(expr))
+        return _PLACEHOLDER.sub(lambda match: literal(kernel.constants[match.group(0)]), text)
 
     statements = [f"{code(symbol)} = {code(expr)};" for symbol, expr in kernel.temporaries]
     statements += [f"out[{k}] = {code(expr)};" for k, expr in enumerate(kernel.outputs)]
@@ -389,221 +629,289 @@ def c_kernel(kernel: Kernel, first_chunk: int) -> tuple[str, int]:
     return "\n".join(lines) + "\n", len(names)
 
 
-def solver_header(m: int, r: int, s: int, rank_rtol: float) -> str:
-    """The macros the C solvers and integrators read: dimensions, block offsets
-    (:func:`layout_macros`) and the numerical policy (:func:`kronlag.tolerances.c_macros`)."""
-    return (f"#define KRONLAG_M {m}\n#define KRONLAG_R {r}\n#define KRONLAG_S {s}\n#define KRONLAG_K {r + s}\n"
-            + layout_macros("dynamics", m, r, s) + layout_macros("tangent", m, r, s) + c_macros(rank_rtol))
+#: Threads start and end within a call (no pool survives a fork).
+C_BATCH = r"""
+#if KRONLAG_IN_PART(0)
+#include <pthread.h>
+#define KRONLAG_MAX_THREADS 64
+#define KRONLAG_MIN_STATES_PER_THREAD 256
+typedef void (*kronlag_range_work)(const void *job, long begin, long end);
+struct kronlag_range { kronlag_range_work work; const void *job; long begin, end; };
+
+static void *kronlag_run_range(void *argument)
+{
+    const struct kronlag_range *range = argument;
+    range->work(range->job, range->begin, range->end);
+    return NULL;
+}
+
+static void kronlag_parallel(kronlag_range_work work, const void *job, long n, int threads)
+{
+    if (threads > KRONLAG_MAX_THREADS) threads = KRONLAG_MAX_THREADS;
+    if (threads > n / KRONLAG_MIN_STATES_PER_THREAD) threads = (int)(n / KRONLAG_MIN_STATES_PER_THREAD);
+    if (threads < 2) {
+        work(job, 0, n);
+        return;
+    }
+    pthread_t handles[KRONLAG_MAX_THREADS];
+    struct kronlag_range ranges[KRONLAG_MAX_THREADS];
+    int started[KRONLAG_MAX_THREADS];
+    for (int k = 0; k < threads; ++k) {
+        ranges[k] = (struct kronlag_range){work, job, n * k / threads, n * (k + 1) / threads};
+        started[k] = k > 0 && pthread_create(&handles[k], NULL, kronlag_run_range, &ranges[k]) == 0;
+    }
+    for (int k = 0; k < threads; ++k)
+        if (!started[k]) kronlag_run_range(&ranges[k]);
+    for (int k = 1; k < threads; ++k)
+        if (started[k]) pthread_join(handles[k], NULL);
+}
+
+typedef void (*kronlag_kernel_function)(double t, const double *q, const double *qd, const double *p, double *out);
+struct kronlag_kernel_job {
+    kronlag_kernel_function kernel;
+    long m, size, t_step, qd_step, p_step;
+    const double *t, *q, *qd, *p;
+    double *out;
+};
+
+static void kronlag_kernel_range(const void *argument, long begin, long end)
+{
+    const struct kronlag_kernel_job *job = argument;
+    for (long i = begin; i < end; ++i)
+        job->kernel(job->t[i * job->t_step], job->q + i * job->m, job->qd + i * job->qd_step,
+                    job->p + i * job->p_step, job->out + i * job->size);
+}
+
+void kronlag_kernel_batch(kronlag_kernel_function kernel, long n, long m, long size, const double *t, long t_step,
+                          const double *q, const double *qd, long qd_step, const double *p, long p_step,
+                          double *out, int threads)
+{
+    struct kronlag_kernel_job job = {kernel, m, size, t_step, qd_step, p_step, t, q, qd, p, out};
+    kronlag_parallel(kronlag_kernel_range, &job, n, threads);
+}
+#endif
+"""
+
+#: Batched forward dynamics, appended after the solver (``src/kronlag/c/augmented.c``): ``kronlag_forward_dynamics_packed``
+#: at ``n`` states, writing ``[qdd, lam, mu]`` (m + r + s) per state and its rank (-1: singular).
+C_FORWARD_DYNAMICS_BATCH = r"""
+struct kronlag_forward_job {
+    long n_parameters, t_step, p_step;
+    const double *t, *q, *qd, *p;
+    double alpha, beta;
+    double *out;
+    int *rank;
+};
+
+static void kronlag_forward_range(const void *argument, long begin, long end)
+{
+    const struct kronlag_forward_job *job = argument;
+    double in[3 + 2 * KRONLAG_M + job->n_parameters];
+    in[1] = job->alpha;
+    in[2] = job->beta;
+    for (long i = begin; i < end; ++i) {
+        in[0] = job->t[i * job->t_step];
+        memcpy(in + 3, job->q + i * KRONLAG_M, KRONLAG_M * sizeof(double));
+        memcpy(in + 3 + KRONLAG_M, job->qd + i * KRONLAG_M, KRONLAG_M * sizeof(double));
+        memcpy(in + 3 + 2 * KRONLAG_M, job->p + i * job->p_step, job->n_parameters * sizeof(double));
+        job->rank[i] = kronlag_forward_dynamics_packed(in, job->out + i * (KRONLAG_M + KRONLAG_K));
+    }
+}
+
+void kronlag_forward_dynamics_batch(long n, long n_parameters, const double *t, long t_step, const double *q,
+                                    const double *qd, const double *p, long p_step, double alpha, double beta,
+                                    double *out, int *rank, int threads)
+{
+    struct kronlag_forward_job job = {n_parameters, t_step, p_step, t, q, qd, p, alpha, beta, out, rank};
+    kronlag_parallel(kronlag_forward_range, &job, n, threads);
+}
+"""
+
+
+def batch_threads() -> int:
+    """Threads of a batched C call: ``$KRONLAG_THREADS``, else the CPUs this process may use."""
+    configured = os.environ.get("KRONLAG_THREADS", "").strip()
+    if configured.isdigit() and int(configured) > 0:
+        return int(configured)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def _fast_call_module():
+    """The fixed call layer ``kronlag._call`` (built with the package), or None: then ctypes."""
+    try:
+        from . import _call
+    except ImportError:
+        return None
+    return _call
+
+
+#: ``kronlag._call`` when it was built at install time, else None (ctypes is used instead).
+FAST_CALL = _fast_call_module()
+
+_POINTER = ctypes.c_void_p
+_LONG = ctypes.c_long
 
 
 class CLibrary:
-    """Kernels compiled with the C compiler into a shared library, loaded with :mod:`ctypes`.
+    """Kernels compiled with the C compiler into one shared library (:class:`KernelLibrary`).
 
-    With ``solver=True`` the library also holds ``kronlag_forward_dynamics``
-    (needs a ``"dynamics"`` kernel; ``src/kronlag/c/linalg.c`` and ``augmented.c``),
-    which decides ranks with ``rank_rtol`` (:mod:`kronlag.tolerances`).
-    ``evaluate(name, t, q, qd, p)`` returns the flat float64 output of kernel ``name``.
+    Single calls go through :data:`FAST_CALL` (arrays read in place), else through
+    :mod:`ctypes` with per-call buffers (so both are safe from several threads);
+    batched calls through :mod:`ctypes` (which releases the GIL) into
+    :data:`C_BATCH`.  With a ``"dynamics"`` kernel the library also holds the
+    solver of the augmented system (``src/kronlag/c/augmented.c``).
     """
 
-    def __init__(self, kernels: Sequence[Kernel], *, solver: bool = False, rank_rtol: float = RANK_RTOL):
+    def __init__(self, kernels: Sequence[Kernel], *, m: int, n_parameters: int, rank_rtol: float = RANK_RTOL):
         self.kernels = {kernel.name: kernel for kernel in kernels}
+        self.m, self.n_parameters = m, n_parameters
         parts, chunks = [_C_PREAMBLE], 1
         for kernel in kernels:
             code, count = c_kernel(kernel, chunks)
             parts.append(code)
             chunks += count
+        parts.append(C_BATCH)
+        solver = "dynamics" in self.kernels
         if solver:
-            dynamics = self.kernels["dynamics"]
-            m, r, s = (dynamics.blocks[i].shape[0] for i in (0, 2, 6))
+            self.shape = dynamics_shape(self.kernels["dynamics"])
+            m, r, s = self.shape
             parts.append("#if KRONLAG_IN_PART(0)\n" + solver_header(m, r, s, rank_rtol))
-            parts.append(c_file("linalg.c") + c_file("augmented.c") + "#endif\n")
+            parts.append(c_file("linalg.c") + c_file("augmented.c") + C_FORWARD_DYNAMICS_BATCH + "#endif\n")
         self.source = "\n".join(parts)
         self.path = compile_shared_library(self.source, parts=min(chunks, os.cpu_count() or 1, 8))
         self.library = ctypes.CDLL(str(self.path))
-        pointer = ctypes.c_void_p
         self.functions = {}
         for name in self.kernels:
             function = getattr(self.library, f"kronlag_{name}")
-            function.argtypes = [ctypes.c_double, pointer, pointer, pointer, pointer]
+            function.argtypes = [ctypes.c_double, _POINTER, _POINTER, _POINTER, _POINTER]
             function.restype = None
             self.functions[name] = function
+        self._kernel_batch = self.library.kronlag_kernel_batch
+        self._kernel_batch.argtypes = [_POINTER, _LONG, _LONG, _LONG, _POINTER, _LONG, _POINTER, _POINTER, _LONG,
+                                       _POINTER, _LONG, _POINTER, ctypes.c_int]
+        self._kernel_batch.restype = None
         if solver:
-            packed = self.library.kronlag_forward_dynamics_packed
-            packed.argtypes = [pointer, pointer]
-            packed.restype = ctypes.c_int
-            self.forward_dynamics_packed = packed
-            self.shape = (m, r, s)
+            self._packed = self.library.kronlag_forward_dynamics_packed
+            self._packed.argtypes = [_POINTER, _POINTER]
+            self._packed.restype = ctypes.c_int
+            self._forward_batch = self.library.kronlag_forward_dynamics_batch
+            self._forward_batch.argtypes = [_LONG, _LONG, _POINTER, _LONG, _POINTER, _POINTER, _POINTER, _LONG,
+                                            ctypes.c_double, ctypes.c_double, _POINTER, _POINTER, ctypes.c_int]
+            self._forward_batch.restype = None
 
-    def forward_dynamics_caller(self, inputs: np.ndarray) -> Callable:
-        """``call(q, qd, t, alpha, beta) -> (qdd, lam, mu, rank)`` for ``kronlag_forward_dynamics_packed``.
+    @staticmethod
+    def _address(function) -> int:
+        return ctypes.cast(function, ctypes.c_void_p).value
 
-        ``inputs`` is the packed input buffer ``[t, alpha, beta, q, qd, p]`` (the
-        caller keeps ``p`` up to date; the call writes the rest); ``rank < 0``
-        (and None for the arrays) means a singular configuration.  Through a
-        small CPython extension (:func:`call_extension`) when it builds,
-        else through :mod:`ctypes`.
-        """
-        address = ctypes.cast(self.forward_dynamics_packed, ctypes.c_void_p).value
-        extension = call_extension()
-        if extension is not None:
-            return functools.partial(extension.call, (address, inputs.ctypes.data, *self.shape))
-        out = np.zeros(sum(self.shape))
-        return functools.partial(_ctypes_call, self.forward_dynamics_packed, inputs, out, self.shape[0],
-                                 self.shape[1], (inputs.ctypes.data, out.ctypes.data))
+    def evaluator(self, name: str, shape: tuple[int, ...]) -> Callable[..., np.ndarray]:
+        if FAST_CALL is not None:
+            columns = shape[1] if len(shape) == 2 else -1
+            spec = (self._address(self.functions[name]), self.m, self.n_parameters, shape[0], columns)
+            return functools.partial(FAST_CALL.evaluate, spec)
+        return functools.partial(self._ctypes_evaluate, self.functions[name], shape)
 
-    def evaluate(self, name: str, t: float, q: np.ndarray, qd: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """Flat output of kernel ``name`` (its blocks row-major, concatenated)."""
-        out = np.empty(self.kernels[name].size)
-        arrays = [np.ascontiguousarray(x, dtype=float) for x in (q, qd, p)]
-        self.functions[name](t, *(x.ctypes.data for x in arrays), out.ctypes.data)
+    def _ctypes_evaluate(self, function, shape: tuple[int, ...], t: float, q, qd, p: np.ndarray) -> np.ndarray:
+        q = _vector(q, self.m, "q")
+        qd = np.zeros(self.m) if qd is None else _vector(qd, self.m, "qd")
+        out = np.empty(shape)
+        function(t, q.ctypes.data, qd.ctypes.data, _vector(p, self.n_parameters, "p").ctypes.data, out.ctypes.data)
         return out
 
+    def evaluate_batch(self, name: str, t: np.ndarray, q: np.ndarray, qd: np.ndarray | None,
+                       p: np.ndarray) -> np.ndarray:
+        n, size = len(q), self.kernels[name].size
+        out = np.empty((n, size))
+        zero = np.zeros(self.m)
+        self._kernel_batch(self._address(self.functions[name]), n, self.m, size, t.ctypes.data, t.ndim,
+                           q.ctypes.data, zero.ctypes.data if qd is None else qd.ctypes.data,
+                           0 if qd is None else self.m, p.ctypes.data, self.n_parameters if p.ndim == 2 else 0,
+                           out.ctypes.data, batch_threads())
+        return out
 
-def _ctypes_call(function, inputs: np.ndarray, out: np.ndarray, m: int, r: int, pointers: tuple[int, int],
-                 q, qd, t: float, alpha: float, beta: float) -> tuple:
-    """The :mod:`ctypes` twin of ``call`` in :data:`_CALL_EXTENSION`."""
-    inputs[0] = t
-    inputs[1] = alpha
-    inputs[2] = beta
-    inputs[3:3 + m] = q
-    inputs[3 + m:3 + 2 * m] = qd
-    rank = function(*pointers)
-    if rank < 0:
-        return None, None, None, rank
-    values = out.copy()
-    return values[:m], values[m:m + r], values[m + r:], rank
+    def forward_dynamics_function(self) -> Callable[..., tuple]:
+        if FAST_CALL is not None:
+            return functools.partial(FAST_CALL.forward_dynamics,
+                                     (self._address(self._packed), *self.shape, self.n_parameters))
+        return self._ctypes_forward_dynamics
 
+    def _ctypes_forward_dynamics(self, t: float, q, qd, p: np.ndarray, alpha: float, beta: float) -> tuple:
+        m, r, s = self.shape
+        inputs = np.concatenate([(t, alpha, beta), _vector(q, m, "q"), _vector(qd, m, "qd"),
+                                 _vector(p, self.n_parameters, "p")])
+        out = np.empty(m + r + s + 1)
+        rank = self._packed(inputs.ctypes.data, out.ctypes.data)
+        if rank < 0:
+            return None, None, None, rank
+        return out[:m], out[m:m + r], out[m + r:m + r + s], rank
 
-#: A CPython extension that calls ``kronlag_forward_dynamics_packed`` through its
-#: address: ``call(spec, q, qd, t, alpha, beta) -> (qdd, lam, mu, rank)`` with
-#: ``spec = (function address, input buffer address, m, r, s)``.  It saves the
-#: microsecond that ctypes and the NumPy slicing cost per call.
-_CALL_EXTENSION = r"""
-#define PY_SSIZE_T_CLEAN
-#include <Python.h>
-#define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
-#include <numpy/arrayobject.h>
-#include <string.h>
-
-typedef int (*kronlag_packed)(const double *in, double *out);
-
-static int read_vector(PyObject *object, double *target, Py_ssize_t n)
-{
-    PyArrayObject *array = (PyArrayObject *)PyArray_FROMANY(object, NPY_DOUBLE, 1, 1, NPY_ARRAY_IN_ARRAY);
-    if (!array) return -1;
-    int ok = PyArray_DIM(array, 0) == n;
-    if (ok) memcpy(target, PyArray_DATA(array), n * sizeof(double));
-    else PyErr_Format(PyExc_ValueError, "expected a vector of length %zd, got %zd", n,
-                      (Py_ssize_t)PyArray_DIM(array, 0));
-    Py_DECREF(array);
-    return ok ? 0 : -1;
-}
-
-static PyObject *new_vector(const double *data, npy_intp n)
-{
-    PyObject *array = PyArray_SimpleNew(1, &n, NPY_DOUBLE);
-    if (array) memcpy(PyArray_DATA((PyArrayObject *)array), data, n * sizeof(double));
-    return array;
-}
-
-static PyObject *call(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    (void)self;
-    if (nargs != 6 || !PyTuple_Check(args[0]) || PyTuple_GET_SIZE(args[0]) != 5) {
-        PyErr_SetString(PyExc_TypeError, "call(spec, q, qd, t, alpha, beta)");
-        return NULL;
-    }
-    kronlag_packed function = (kronlag_packed)PyLong_AsVoidPtr(PyTuple_GET_ITEM(args[0], 0));
-    double *in = (double *)PyLong_AsVoidPtr(PyTuple_GET_ITEM(args[0], 1));
-    Py_ssize_t m = PyLong_AsSsize_t(PyTuple_GET_ITEM(args[0], 2));
-    Py_ssize_t r = PyLong_AsSsize_t(PyTuple_GET_ITEM(args[0], 3));
-    Py_ssize_t s = PyLong_AsSsize_t(PyTuple_GET_ITEM(args[0], 4));
-    double t = PyFloat_AsDouble(args[3]), alpha = PyFloat_AsDouble(args[4]), beta = PyFloat_AsDouble(args[5]);
-    if (PyErr_Occurred()) return NULL;
-    in[0] = t; in[1] = alpha; in[2] = beta;
-    if (read_vector(args[1], in + 3, m) || read_vector(args[2], in + 3 + m, m)) return NULL;
-    double *out = PyMem_Malloc((m + r + s + 1) * sizeof(double));
-    if (!out) return PyErr_NoMemory();
-    int rank = function(in, out);
-    PyObject *items[4] = {NULL, NULL, NULL, PyLong_FromLong(rank)};
-    for (int i = 0; i < 3; ++i)
-        items[i] = rank < 0 ? Py_NewRef(Py_None)
-                            : new_vector(out + (i > 0 ? m : 0) + (i > 1 ? r : 0), i == 0 ? m : i == 1 ? r : s);
-    PyMem_Free(out);
-    PyObject *result = items[0] && items[1] && items[2] && items[3]
-                       ? PyTuple_Pack(4, items[0], items[1], items[2], items[3]) : NULL;
-    for (int i = 0; i < 4; ++i) Py_XDECREF(items[i]);
-    return result;
-}
-
-static PyMethodDef methods[] = {
-    {"call", (PyCFunction)(void (*)(void))call, METH_FASTCALL, "call(spec, q, qd, t, alpha, beta)"},
-    {NULL, NULL, 0, NULL}
-};
-
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_kronlag_call", NULL, -1, methods};
-
-PyMODINIT_FUNC PyInit__kronlag_call(void)
-{
-    import_array();
-    return PyModule_Create(&module);
-}
-"""
+    def forward_dynamics_batch(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, p: np.ndarray,
+                               alpha: float, beta: float) -> tuple[np.ndarray, np.ndarray]:
+        n = len(q)
+        out = np.empty((n, sum(self.shape)))
+        ranks = np.empty(n, dtype=np.int32)
+        self._forward_batch(n, self.n_parameters, t.ctypes.data, t.ndim, q.ctypes.data, qd.ctypes.data,
+                            p.ctypes.data, self.n_parameters if p.ndim == 2 else 0, alpha, beta, out.ctypes.data,
+                            ranks.ctypes.data, batch_threads())
+        out[ranks < 0] = np.nan
+        return out, ranks
 
 
-@functools.cache
-def call_extension():
-    """The compiled :data:`_CALL_EXTENSION` module, or None where it cannot be built
-    (no Python headers, say): callers then use :mod:`ctypes`."""
-    include = [sysconfig.get_paths()["include"], np.get_include()]
-    version = f"/* Python {sys.version}, NumPy {np.__version__} */\n"
-    try:
-        path = compile_shared_library(version + _CALL_EXTENSION, include=include)
-        loader = importlib.machinery.ExtensionFileLoader("_kronlag_call", str(path))
-        spec = importlib.util.spec_from_file_location("_kronlag_call", str(path), loader=loader)
-        module = importlib.util.module_from_spec(spec)
-        loader.exec_module(module)
-    except (RuntimeError, OSError, ImportError):
-        return None
-    return module
+#: The backends :class:`~kronlag.numeric.NumericModel` can use, by the name users pass.
+BACKENDS: dict[str, type] = {"c": CLibrary, "python": PythonLibrary}
 
 
-def compile_shared_library(source: str, *, parts: int = 1, include: Sequence[str] = ()) -> Path:
-    """Compile C ``source`` into a shared library in :func:`cache_directory` (reused when present).
+def compile_shared_library(source: str, *, parts: int = 1) -> Path:
+    """Compile C ``source`` into a shared library in :func:`cache_directory` (reused when intact).
 
     With ``parts > 1`` the source is compiled ``parts`` times in parallel with
     ``-DKRONLAG_PART=i -DKRONLAG_PARTS=parts`` (each keeps the chunks
-    ``KRONLAG_IN_PART`` selects) and the objects are linked.  ``include``:
-    header directories.
+    ``KRONLAG_IN_PART`` selects) and the objects are linked.  The library is
+    renamed into place, then its SHA-256 is written next to it
+    (``<library>.sha256``); a library whose content does not match its recorded
+    hash (truncated, replaced, or its build interrupted) is rebuilt, never returned.
+
+    Raises
+    ------
+    CompilerError
+        No compiler, or it failed.
+    PermissionError
+        The cache directory is not the user's alone (see :func:`cache_directory`).
     """
     compiler = c_compiler()
     if compiler is None:
-        raise RuntimeError("the C backend needs a C compiler (gcc or cc on PATH, or $CC); "
-                           "use backend='numpy'")
-    flags = (*_CFLAGS, *(f"-I{directory}" for directory in include))
+        raise CompilerError("the C backend needs a C compiler (gcc or cc on PATH, or $CC); "
+                            "use backend='python'")
+    flags = _CFLAGS
     key = hashlib.sha256("\0".join((compiler, *flags, source)).encode()).hexdigest()[:32]
-    directory = cache_directory()
-    directory.mkdir(parents=True, exist_ok=True)
+    directory = _private_cache_directory()
     target = directory / f"kronlag_{key}.so"
-    if target.exists():
+    if _intact(target):
         return target
     with tempfile.TemporaryDirectory(dir=directory) as work:
         source_path = Path(work) / "model.c"
         source_path.write_text(source)
         objects = [Path(work) / f"part{i}.o" for i in range(parts)]
         defines = [[f"-DKRONLAG_PART={i}", f"-DKRONLAG_PARTS={parts}"] if parts > 1 else [] for i in range(parts)]
-        processes = [subprocess.Popen([compiler, *flags, *define, "-c", "-o", str(obj), str(source_path)],
-                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-                     for define, obj in zip(defines, objects)]
+        try:
+            processes = [subprocess.Popen([compiler, *flags, *define, "-c", "-o", str(obj), str(source_path)],
+                                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                         for define, obj in zip(defines, objects)]
+        except OSError as error:
+            raise CompilerError(f"cannot run the C compiler {compiler}: {error}") from None
         errors = [process.communicate()[1] for process in processes]
-        failed = [error for process, error in zip(processes, errors) if process.returncode]
+        failed = [f"exit status {process.returncode}\n{error[-4000:]}"
+                  for process, error in zip(processes, errors) if process.returncode]
         built = Path(work) / "model.so"
         if not failed:
             undefined = ["-undefined", "dynamic_lookup"] if sys.platform == "darwin" else []
-            link = subprocess.run([compiler, "-shared", *undefined, "-o", str(built), *map(str, objects), "-lm"],
-                                  capture_output=True, text=True)
-            failed = [link.stderr] if link.returncode else []
-        if failed:
-            raise RuntimeError(f"compiling the generated C code failed:\n{failed[0][-4000:]}")
-        os.replace(built, target)  # atomic: concurrent builders of the same source agree
+            link = subprocess.run([compiler, "-shared", "-pthread", *undefined, "-o", str(built), *map(str, objects),
+                                   "-lm"], capture_output=True, text=True)
+            failed = [f"exit status {link.returncode} (linking)\n{link.stderr[-4000:]}"] if link.returncode else []
+        if failed or not built.is_file():
+            output = failed[0] if failed else "no library was written"
+            raise CompilerError(f"compiling the generated C code with {compiler} failed: {output}".rstrip())
+        # the library first, its hash after: a library without a matching hash is never loaded
+        digest = _digest(built)
+        os.replace(built, target)
+        _write_atomically(_digest_path(target), digest.encode(), Path(work))
     return target

@@ -204,8 +204,9 @@ class Equations:
         parameters : dict
             Value of every parameter, keyed by name or symbol: a float, or a
             callable ``f(t)`` for a time-varying one (e.g. a torque).
-        backend : {"auto", "numpy", "c"}
-            ``"auto"``: ``"c"`` when a C compiler is available, else ``"numpy"``.
+        backend : {"auto", "c", "python"}
+            ``"auto"``: ``"c"`` when a C compiler is available and works, else ``"python"``
+            (``"numpy"``: deprecated name of ``"python"``).
         rank_rtol : float, optional
             Relative rank tolerance on ``[Phi_q; A]`` for every rank decision of the
             model (default :data:`kronlag.tolerances.RANK_RTOL`).

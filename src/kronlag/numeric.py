@@ -36,6 +36,7 @@ __all__ = [
     "NumericModel",
     "ForwardDynamicsResult",
     "InverseDynamicsResult",
+    "ForwardDynamicsBatch",
     "SingularConfigurationError",
     "AssemblyError",
     "RedundantConstraintsWarning",
@@ -44,6 +45,19 @@ __all__ = [
 
 #: Kernels whose result is a vector (all others are matrices, even when 1 x 1).
 _VECTOR_KERNELS = frozenset({"g", "Phi", "b", "f_Q", "Cqd", "gamma", "gamma_nh", "potential_energy"})
+#: Kernels that read the speeds ``qd`` (the others read ``q`` and ``t`` only).
+_SPEED_KERNELS = frozenset({"C", "C_christoffel", "Cqd", "f_Q", "gamma", "gamma_nh"})
+#: The matrices :meth:`NumericModel.evaluate_batch` evaluates.
+BATCH_MATRICES = (*codegen.ACCESSOR_KERNELS, "C", "Cqd", "C_christoffel")
+#: Kernels compiled into one library on first use of any of them (the ``"dynamics"`` kernel, with the
+#: solver, is built with the model): the accessors, and the two Coriolis matrices, by far the largest
+#: kernels, which the simulation does not need (one compile for both).
+_LIBRARY_GROUPS = {"accessors": (*codegen.ACCESSOR_KERNELS, "Cqd"), "coriolis": ("C", "C_christoffel")}
+_GROUP_OF = {kernel: group for group, kernels in _LIBRARY_GROUPS.items() for kernel in kernels}
+#: Former backend names, still accepted with a DeprecationWarning.
+_DEPRECATED_BACKENDS = {"numpy": "python"}
+#: The dynamics kernel's blocks that are matrices (the others are vectors).
+_MATRIX_TERMS = frozenset({"M", "Phi_q", "A"})
 
 
 class SingularConfigurationError(RuntimeError):
@@ -110,6 +124,55 @@ class InverseDynamicsResult:
     lam: np.ndarray
     mu: np.ndarray
     unique: bool
+
+
+@dataclass(slots=True, eq=False)
+class ForwardDynamicsBatch:
+    """Solutions of the augmented system at N states (:meth:`NumericModel.forward_dynamics_batch`).
+
+    Attributes
+    ----------
+    qdd : (N, m) accelerations.
+    lam : (N, r) multipliers ``lambda``.
+    mu : (N, s) multipliers ``mu``.
+    rank : (N,) int
+        Numerical rank of ``[Phi_q; A]`` at each state; -1 marks a singular
+        configuration, whose row of ``qdd``, ``lam`` and ``mu`` is NaN.
+    """
+
+    qdd: np.ndarray
+    lam: np.ndarray
+    mu: np.ndarray
+    rank: np.ndarray
+
+
+def split_terms(kernel: codegen.Kernel, flat: np.ndarray) -> dict[str, np.ndarray]:
+    """The blocks of the ``"dynamics"`` kernel's output by name (``M``, ``h``, ``Phi``, ...), as views,
+    at the offsets of :func:`kronlag.codegen.layout`.
+
+    ``flat`` is (size,) for one state or (N, size) for N states (the blocks then have a leading N).
+    """
+    return {name: flat[..., offset:offset + int(np.prod(shape))].reshape(flat.shape[:-1] + shape)
+            for name, offset, shape in codegen.layout("dynamics", *codegen.dynamics_shape(kernel))}
+
+
+def solve_dynamics_terms(kernel: codegen.Kernel, flat: np.ndarray, qd: np.ndarray, alpha: float,
+                         beta: float, *, rank_rtol: float = RANK_RTOL) -> tuple:
+    """Forward dynamics from the flat output of the ``"dynamics"`` kernel with :func:`solve_augmented`.
+
+    Returns ``(qdd, lam, mu, rank)``, or ``(None, None, None, -1)`` at a singular configuration:
+    the Python backend's twin of ``kronlag_forward_dynamics_packed`` in ``src/kronlag/c/augmented.c``.
+    """
+    terms = split_terms(kernel, flat)
+    r = len(terms["Phi"])
+    G = np.vstack([terms["Phi_q"], terms["A"]])
+    c = np.concatenate([terms["gamma"] - 2 * alpha * terms["Phi_q"] @ qd - beta ** 2 * terms["Phi"],
+                        terms["gamma_nh"] - alpha * (terms["A"] @ qd + terms["b"])])
+    solution = solve_augmented(terms["M"], terms["h"], G, c, rank_rtol=rank_rtol)
+    if solution is None:
+        return None, None, None, -1
+    qdd, nu, rank = solution
+    return qdd, nu[:r], nu[r:], rank
 
 
 def solve_augmented(M: np.ndarray, h: np.ndarray, G: np.ndarray, c: np.ndarray, *,
@@ -188,8 +251,11 @@ class NumericModel:
     equations : Equations
     parameters : mapping
         Value (float or callable of ``t``) of every parameter, keyed by name or symbol.
-    backend : {"auto", "numpy", "c"}
-        ``"auto"`` is ``"c"`` when a C compiler is available, else ``"numpy"``.
+    backend : {"auto", "c", "python"}
+        ``"c"``: generated C, compiled; ``"python"``: generated Python (NumPy-vectorised
+        over batches), no compiler needed; ``"auto"``: ``"c"`` when a C compiler is
+        available and works, else ``"python"`` (with a RuntimeWarning when the
+        compiler fails).  ``"numpy"``, the former name of ``"python"``, is deprecated.
     rank_rtol : float
         Relative rank tolerance on ``[Phi_q; A]`` shared by forward dynamics, the
         projections, :meth:`assemble` and the integrators (see :mod:`kronlag.tolerances`).
@@ -197,21 +263,24 @@ class NumericModel:
     Notes
     -----
     The forward-dynamics kernel is generated and compiled here; the other
-    matrices on first use (``C``, ``Cqd`` and ``C_christoffel``, the largest,
-    each on its own).  With the C backend, ``forward_dynamics`` packs its
-    inputs into a buffer owned by the model: share a model between threads
-    only under a lock.
+    matrices on first use (``C`` and ``C_christoffel``, the largest, together
+    apart from the rest).  Every call uses its own buffers: a model may be shared
+    between threads.
     """
 
     def __init__(self, equations: Equations, parameters: Mapping, *, backend: str = "auto",
                  rank_rtol: float = RANK_RTOL):
-        if backend not in ("auto", "numpy", "c"):
-            raise ValueError(f"backend must be 'auto', 'numpy' or 'c', got {backend!r}")
-        if backend == "auto":
-            backend = "c" if codegen.c_compiler() else "numpy"
+        if backend in _DEPRECATED_BACKENDS:
+            warnings.warn(f"backend={backend!r} is deprecated, use backend={_DEPRECATED_BACKENDS[backend]!r}",
+                          DeprecationWarning, stacklevel=3)
+            backend = _DEPRECATED_BACKENDS[backend]
+        if backend != "auto" and backend not in codegen.BACKENDS:
+            raise ValueError(f"backend must be 'auto' or one of {', '.join(map(repr, codegen.BACKENDS))}, "
+                             f"got {backend!r}")
+        automatic = backend == "auto"
         self.equations = equations
-        self.backend = backend
         self.rank_rtol = check_rank_rtol(rank_rtol)
+        self.backend = ("c" if codegen.c_compiler() else "python") if automatic else backend
         self.m, self.r, self.s = equations.shape
         self.coordinate_names = tuple(q.name for q in equations.coordinates)
         self._coordinate_index = {name: i for i, name in enumerate(self.coordinate_names)}
@@ -219,15 +288,20 @@ class NumericModel:
         self._p, self._time_varying = self._resolve(parameters)
         self.time_varying = bool(self._time_varying)
         self._source = codegen.KernelSource(equations)
-        self._libraries: dict[str, codegen.NumpyLibrary | codegen.CLibrary] = {}
+        self._libraries: dict[str, codegen.KernelLibrary] = {}
+        self._evaluators: dict[str, Callable[..., np.ndarray]] = {}
         self._c_kernels: dict[str, str] = {}
-        self._dynamics = self._library("dynamics")
-        self._terms_layout = [(name, offset, offset + int(np.prod(shape)), shape)
-                              for name, offset, shape in codegen.layout("dynamics", self.m, self.r, self.s)]
+        try:
+            self._dynamics = self._library("dynamics")
+        except codegen.CompilerError as error:
+            if not automatic:
+                raise
+            warnings.warn(f"{equations.system.name}: the C compiler failed, using the (slower) Python backend: "
+                          f"{error}", RuntimeWarning, stacklevel=3)
+            self.backend = "python"
+            self._dynamics = self._library("dynamics")
+        self._forward = self._dynamics.forward_dynamics_function()
         self._warned_redundant = False
-        if backend == "c":
-            self._fd_in = np.concatenate([np.zeros(3 + 2 * self.m), self._p])
-            self._fd_call = self._dynamics.forward_dynamics_caller(self._fd_in)
 
     # -- parameters -----------------------------------------------------------------------
 
@@ -265,17 +339,15 @@ class NumericModel:
 
     # -- code ------------------------------------------------------------------------------
 
-    def _library(self, group: str) -> codegen.NumpyLibrary | codegen.CLibrary:
-        """The compiled kernels of ``group`` (built on first use): "accessors" (all of
-        :data:`kronlag.codegen.ACCESSOR_KERNELS`) or the single kernel of that name."""
+    def _library(self, group: str) -> codegen.KernelLibrary:
+        """The compiled kernels of ``group`` (built on first use): one of :data:`_LIBRARY_GROUPS`
+        or the single kernel of that name."""
         library = self._libraries.get(group)
         if library is None:
-            names = codegen.ACCESSOR_KERNELS if group == "accessors" else (group,)
+            names = _LIBRARY_GROUPS.get(group, (group,))
             kernels = [self._source.kernel(name) for name in names]
-            if self.backend == "c":
-                library = codegen.CLibrary(kernels, solver=group == "dynamics", rank_rtol=self.rank_rtol)
-            else:
-                library = codegen.NumpyLibrary(kernels)
+            library = codegen.BACKENDS[self.backend](kernels, m=self.m, n_parameters=len(self.parameter_names),
+                                                     rank_rtol=self.rank_rtol)
             self._libraries[group] = library
         return library
 
@@ -299,19 +371,45 @@ class NumericModel:
         """Names of the holonomic constraints, in the order of ``Phi`` (length r)."""
         return tuple(constraint.name for constraint in self.equations.system.constraints)
 
+    def _group(self, name: str) -> codegen.KernelLibrary:
+        return self._library(_GROUP_OF.get(name, name))
+
+    def _evaluator(self, name: str) -> Callable[..., np.ndarray]:
+        """``f(t, q, qd, p)`` -> matrix ``name`` in its public shape (built on first use)."""
+        evaluator = self._evaluators.get(name)
+        if evaluator is None:
+            library = self._group(name)
+            kernel = library.kernels[name]
+            shape = (kernel.size,) if name in _VECTOR_KERNELS or len(kernel.blocks) > 1 else kernel.blocks[0].shape
+            evaluator = self._evaluators[name] = library.evaluator(name, shape)
+        return evaluator
+
     def _evaluate(self, name: str, q, qd, t: float) -> np.ndarray:
-        q = self._vector(q, "q")
-        qd = self._vector(qd, "qd") if qd is not None else np.zeros(self.m)
-        library = self._library("accessors" if name in codegen.ACCESSOR_KERNELS else name)
-        flat = library.evaluate(name, t, q, qd, self.parameter_vector(t))
-        (block,) = library.kernels[name].blocks
-        return flat if name in _VECTOR_KERNELS else flat.reshape(block.shape)
+        evaluator = self._evaluators.get(name) or self._evaluator(name)
+        return evaluator(t, q, qd, self.parameter_vector(t) if self._time_varying else self._p)
 
     def _vector(self, value, what: str) -> np.ndarray:
         vector = np.asarray(value, dtype=float)
         if vector.shape != (self.m,):
             raise ValueError(f"{what} must have shape ({self.m},), got {vector.shape}")
         return vector
+
+    def _states(self, value, what: str) -> np.ndarray:
+        states = np.ascontiguousarray(value, dtype=float)
+        if states.ndim != 2 or states.shape[1] != self.m:
+            raise ValueError(f"{what} must have shape (N, {self.m}), got {states.shape}")
+        return states
+
+    def _batch_times(self, t, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(t, p)`` for a batch of ``n`` states: ``t`` 0-d or (n,), ``p`` (P,) or (n, P)."""
+        times = np.array(t, dtype=float)  # a copy, contiguous, 0-d for a number
+        if times.shape not in ((), (n,)):
+            raise ValueError(f"t must be a number or have shape ({n},), got {times.shape}")
+        if not self._time_varying:
+            return times, self._p
+        if times.ndim == 0:
+            return times, self.parameter_vector(float(times))
+        return times, np.array([self.parameter_vector(time) for time in times]).reshape(n, len(self._p))
 
     # -- matrices --------------------------------------------------------------------------
 
@@ -383,9 +481,7 @@ class NumericModel:
             ``M`` (m, m), ``h = f_Q - C qd - g`` (m,), ``Phi`` (r,), ``Phi_q`` (r, m),
             ``gamma`` (r,), ``A`` (s, m), ``b`` (s,), ``gamma_nh`` (s,).
         """
-        q, qd = self._vector(q, "q"), self._vector(qd, "qd")
-        flat = self._dynamics.evaluate("dynamics", t, q, qd, self.parameter_vector(t))
-        return {name: flat[start:stop].reshape(shape) for name, start, stop, shape in self._terms_layout}
+        return split_terms(self._dynamics.kernels["dynamics"], self._evaluate("dynamics", q, qd, t))
 
     def forward_dynamics(self, q, qd, t: float = 0.0, *, alpha: float = 0.0,
                          beta: float = 0.0) -> ForwardDynamicsResult:
@@ -412,32 +508,83 @@ class NumericModel:
         SingularConfigurationError
             M is not positive definite on the null space of ``[Phi_q; A]``.
         """
-        m, r = self.m, self.r
-        if self.backend == "c":
-            for i, function in self._time_varying:
-                self._fd_in[3 + 2 * m + i] = function(t)
-            qdd, lam, mu, rank = self._fd_call(q, qd, t, alpha, beta)
-            if rank < 0:
-                raise SingularConfigurationError(q, qd, t)
-        else:
-            terms = self.dynamics_terms(q, qd, t)
-            qd = np.asarray(qd, dtype=float)
-            G = np.vstack([terms["Phi_q"], terms["A"]])
-            c = np.concatenate([terms["gamma"] - 2 * alpha * terms["Phi_q"] @ qd - beta ** 2 * terms["Phi"],
-                                terms["gamma_nh"] - alpha * (terms["A"] @ qd + terms["b"])])
-            solution = solve_augmented(terms["M"], terms["h"], G, c, rank_rtol=self.rank_rtol)
-            if solution is None:
-                raise SingularConfigurationError(q, qd, t)
-            qdd, nu, rank = solution
-            lam, mu = nu[:r], nu[r:]
-        unique = rank == r + self.s
+        parameters = self.parameter_vector(t) if self._time_varying else self._p
+        qdd, lam, mu, rank = self._forward(t, q, qd, parameters, alpha, beta)
+        if rank < 0:
+            raise SingularConfigurationError(q, qd, t)
+        unique = rank == self.r + self.s
         if not unique and not self._warned_redundant:
             self._warned_redundant = True
             warnings.warn(f"{self.equations.system.name}: the constraint Jacobian [Phi_q; A] has rank {rank} "
-                          f"< {r + self.s} (redundant constraints); the accelerations are unique, the "
+                          f"< {self.r + self.s} (redundant constraints); the accelerations are unique, the "
                           "multipliers returned are the minimum-norm ones", RedundantConstraintsWarning,
                           stacklevel=2)
         return ForwardDynamicsResult(qdd, lam, mu, unique, rank)
+
+    # -- many states at once ------------------------------------------------------------------
+
+    def forward_dynamics_batch(self, q, qd, t=0.0, *, alpha: float = 0.0, beta: float = 0.0
+                               ) -> ForwardDynamicsBatch:
+        """:meth:`forward_dynamics` at N states in one call (C: one call into the library, threaded).
+
+        Parameters
+        ----------
+        q, qd : (N, m)
+        t : float or (N,)
+        alpha, beta : float
+            Baumgarte stabilization, as in :meth:`forward_dynamics`.
+
+        Returns
+        -------
+        ForwardDynamicsBatch
+            ``qdd`` (N, m), ``lam`` (N, r), ``mu`` (N, s), ``rank`` (N,); a singular
+            state has rank -1 and NaN results (no exception: the other states stand).
+
+        Notes
+        -----
+        The C backend splits the states over ``$KRONLAG_THREADS`` threads (default:
+        the CPUs this process may use) and releases the GIL.
+        """
+        q, qd = self._states(q, "q"), self._states(qd, "qd")
+        if qd.shape != q.shape:
+            raise ValueError(f"qd must have the shape of q, {q.shape}, got {qd.shape}")
+        times, parameters = self._batch_times(t, len(q))
+        out, rank = self._dynamics.forward_dynamics_batch(times, q, qd, parameters, float(alpha), float(beta))
+        m, r = self.m, self.r
+        return ForwardDynamicsBatch(out[:, :m], out[:, m:m + r], out[:, m + r:], rank)
+
+    def evaluate_batch(self, name: str, q, qd=None, t=0.0) -> np.ndarray:
+        """Matrix ``name`` at N states in one call: ``model.evaluate_batch("M", q)[i] == model.M(q[i])``.
+
+        Parameters
+        ----------
+        name : str
+            One of :data:`BATCH_MATRICES`: ``"M"``, ``"g"``, ``"Phi"``, ``"Phi_q"``, ``"A"``, ``"b"``,
+            ``"f_Q"``, ``"gamma"``, ``"gamma_nh"``, ``"potential_energy"``, ``"C"``, ``"Cqd"``,
+            ``"C_christoffel"``.
+        q : (N, m)
+        qd : (N, m), needed by ``C``, ``C_christoffel``, ``Cqd``, ``f_Q``, ``gamma``, ``gamma_nh``
+        t : float or (N,)
+
+        Returns
+        -------
+        (N, *shape)
+            ``shape`` that of the single call (``(m, m)`` for ``M``, ``(m,)`` for ``g``, ``(1,)`` for
+            ``potential_energy``).
+        """
+        if name not in BATCH_MATRICES:
+            raise ValueError(f"unknown matrix {name!r}; choose from {', '.join(BATCH_MATRICES)}")
+        q = self._states(q, "q")
+        if qd is None and name in _SPEED_KERNELS:
+            raise ValueError(f"{name} depends on the speeds: give qd, shape (N, {self.m})")
+        qd = None if qd is None else self._states(qd, "qd")
+        if qd is not None and qd.shape != q.shape:
+            raise ValueError(f"qd must have the shape of q, {q.shape}, got {qd.shape}")
+        times, parameters = self._batch_times(t, len(q))
+        library = self._group(name)
+        flat = library.evaluate_batch(name, times, q, qd, parameters)
+        (block,) = library.kernels[name].blocks
+        return flat.reshape(len(q), *((block.size,) if name in _VECTOR_KERNELS else block.shape))
 
     def inverse_dynamics(self, q, qd, qdd, actuated: Sequence = ("q1",), t: float = 0.0, *,
                          rtol: float = 1e-8) -> InverseDynamicsResult:
@@ -486,6 +633,9 @@ class NumericModel:
                                     rtol: float = 1e-8) -> InverseDynamicsResult:
         """:meth:`inverse_dynamics` along a prescribed motion, time along the first axis.
 
+        All N states in one batched kernel call (see :meth:`forward_dynamics_batch`) and
+        stacked least squares (the pseudo-inverse, minimum norm).
+
         Parameters
         ----------
         t : (N,)
@@ -497,18 +647,35 @@ class NumericModel:
             ``forces`` (N, n_a), ``lam`` (N, r), ``mu`` (N, s); ``unique`` if unique at every time.
         """
         t = np.asarray(t, dtype=float)
-        arrays = [np.asarray(x, dtype=float) for x in (q, qd, qdd)]
-        for name, array in zip(("q", "qd", "qdd"), arrays):
+        if t.ndim != 1:
+            raise ValueError(f"t must have shape (N,), got {t.shape}")
+        q, qd, qdd = (self._states(x, name) for x, name in ((q, "q"), (qd, "qd"), (qdd, "qdd")))
+        for name, array in zip(("q", "qd", "qdd"), (q, qd, qdd)):
             if array.shape != (len(t), self.m):
                 raise ValueError(f"{name} must have shape ({len(t)}, {self.m}), got {array.shape}")
-        results = [self.inverse_dynamics(*state, actuated=actuated, t=time, rtol=rtol)
-                   for time, *state in zip(t, *arrays)]
-        n, r, s = len(actuated), self.r, self.s
-        return InverseDynamicsResult(
-            np.array([x.forces for x in results]).reshape(len(t), n),
-            np.array([x.lam for x in results]).reshape(len(t), r),
-            np.array([x.mu for x in results]).reshape(len(t), s),
-            all(x.unique for x in results))
+        columns = _names(list(actuated), self._coordinate_index, "actuated coordinate(s)")
+        times, parameters = self._batch_times(t, len(t))
+        kernel = self._dynamics.kernels["dynamics"]
+        terms = split_terms(kernel, self._dynamics.evaluate_batch(kernel.name, times, q, qd, parameters))
+        inertial = np.einsum("nij,nj->ni", terms["M"], qdd)
+        rhs = inertial - terms["h"]
+        selection = np.zeros((len(t), self.m, len(columns)))
+        selection[:, columns, range(len(columns))] = 1.0
+        system = np.concatenate([selection, -np.swapaxes(terms["Phi_q"], 1, 2), -np.swapaxes(terms["A"], 1, 2)],
+                                axis=2)
+        solution = np.einsum("nij,nj->ni", np.linalg.pinv(system), rhs)
+        residual = np.linalg.norm(np.einsum("nij,nj->ni", system, solution) - rhs, axis=1)
+        scale = np.maximum.reduce([np.linalg.norm(rhs, axis=1), np.linalg.norm(inertial, axis=1),
+                                   np.linalg.norm(terms["h"], axis=1), np.full(len(t), 1e-300)])
+        violated = np.flatnonzero(residual > rtol * scale)
+        if len(violated):
+            i = violated[0]
+            raise ValueError(f"the actuators {list(actuated)} cannot produce this motion at t = {t[i]:g} "
+                             f"(and {len(violated) - 1} other times): the equations of motion are violated "
+                             f"by {residual[i]:.3g} (relative {residual[i] / scale[i]:.3g})")
+        n, r = len(columns), self.r
+        unique = bool(np.all(np.linalg.matrix_rank(system) == system.shape[2])) if len(t) else True
+        return InverseDynamicsResult(solution[:, :n], solution[:, n:n + r], solution[:, n + r:], unique)
 
     # -- consistent initial conditions ---------------------------------------------------------
 

@@ -1,0 +1,10 @@
+"""Builds kronlag's fixed call layer, the C extension ``kronlag._call`` (everything else is in pyproject.toml).
+
+The extension is optional: where it cannot be built, kronlag calls its generated kernels through ctypes.
+"""
+
+import numpy
+from setuptools import Extension, setup
+
+setup(ext_modules=[Extension("kronlag._call", ["src/kronlag/_call.c"], include_dirs=[numpy.get_include()],
+                             extra_compile_args=["-O2"], optional=True)])
