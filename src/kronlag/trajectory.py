@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .reactions import Reaction, joint_reaction, reaction_columns
+
 if TYPE_CHECKING:
     from .numeric import NumericModel
 
@@ -69,7 +71,10 @@ class Trajectory:
     (``q1, q2, ...``); their velocities (``q1d, ...``) and accelerations
     (``q1dd, ...``); ``lambda1 .. lambdar``; ``mu1 .. mus``;
     ``kinetic_energy``; ``potential_energy``; ``position_residual1 ..
-    position_residualr``; ``velocity_residual1 .. velocity_residual(r+s)``.
+    position_residualr``; ``velocity_residual1 .. velocity_residual(r+s)``; then, for
+    every joint of the system (:meth:`kronlag.System.add_joint`), its reaction in world
+    components (:meth:`reaction`): ``<joint>.Fx, <joint>.Fy[, <joint>.Fz]`` and
+    ``<joint>.Mz`` (planar) or ``<joint>.Mx, .My, .Mz`` (spatial).
     """
 
     t: np.ndarray
@@ -129,7 +134,15 @@ class Trajectory:
             ([f"velocity_residual{j + 1}" for j in range(self.velocity_residual.shape[1])],
              self.velocity_residual),
         ]
-        return {name: values[:, i] for labels, values in blocks for i, name in enumerate(labels)}
+        columns = {name: values[:, i] for labels, values in blocks for i, name in enumerate(labels)}
+        columns.update(reaction_columns(self.model, self.t, self.q, self.lam))
+        return columns
+
+    def reaction(self, name: str, *, frame: str = "world") -> Reaction:
+        """The reaction of joint ``name`` at every output time: the force (N, d) and couple
+        (N, 1 planar or N, 3 spatial) that body A exerts on body B at B's joint point, in
+        world or B's body components; see :mod:`kronlag.reactions`."""
+        return joint_reaction(self.model, name, self.t, self.q, self.lam, frame=frame)
 
     def to_csv(self, path: str | PathLike) -> None:
         """Write the columns to a comma-separated file with a one-line header of column names."""
