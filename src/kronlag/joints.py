@@ -48,7 +48,7 @@ systems).  Body B feels ``F`` at ``P_B`` and the couple ``T``; body A feels
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import sympy as sp
@@ -237,7 +237,10 @@ def _local(system: System, value, body: str, dimension: int, what: str) -> sp.Ma
 
 
 def _axis(value, dimension: int, what: str, *, numeric: bool) -> sp.Matrix:
-    entries = sp.Matrix([sp.sympify(x) for x in value]) if isinstance(value, Iterable) else None
+    try:
+        entries = sp.Matrix([sp.sympify(x) for x in value])
+    except (TypeError, sp.SympifyError):
+        entries = None
     if entries is None or entries.rows != dimension:
         raise ModelError(f"{what}: expected a direction of {dimension} entries, got {value!r}")
     if numeric and not all(x.is_number and x.is_real for x in entries):
