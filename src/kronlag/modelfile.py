@@ -31,6 +31,15 @@ Format (every table but ``coordinates`` is optional)::
     position = ["l1/2*cos(q1)", "l1/2*sin(q1)"]
     angle = "q1"                                # rigid: rotation = 3x3 matrix or
                                                 # {axes = "zxz", angles = ["psi", "theta", "phi"]}
+    points = {B = ["l1/2", 0]}                  # named points in body coordinates (from the centre
+                                                # of mass, body axes), usable wherever a point is
+    [[joints]]                                  # kronlag.joints: type, body_a ("ground" or a body),
+    type = "revolute"                           # body_b; optional name, at_a, at_b (body coordinates
+    body_a = "crank"                            # or the name of a point of that body), axis, axis_b,
+    body_b = "coupler"                          # angle, rotation; adds the rows "<name>.x", ...
+    at_a = "B"
+    at_b = ["-l2/2", 0]
+
     [[constraints]]                             # f(q) = 0
     name = "loop x"
     expression = "l1*cos(q1) + l2*cos(q2) - l3*cos(q3) - l4"
@@ -341,7 +350,7 @@ def _read(document: dict, source: str) -> ModelFile:
     reader.table(document, "", required=("coordinates",), optional=(
         "name", "description", "gravity", "parameters", "points", "bodies", "constraints",
         "nonholonomic_constraints", "springs", "dampers", "potentials", "forces", "torques",
-        "generalized_forces", "initial", "simulation", "drives", "drawing", "traces"))
+        "generalized_forces", "initial", "simulation", "drives", "drawing", "traces", "joints"))
     name = reader.string(document.get("name", Path(source).stem), "name")
     description = reader.string(document.get("description", ""), "description")
     coordinate_list = document["coordinates"]
@@ -401,7 +410,7 @@ def _body(reader: _Reader, entry: str, table: dict) -> PlanarBody | RigidBody | 
         raise reader.error(f"{entry}.type", f"expected one of {', '.join(_BODY_TYPES)}, got {kind!r}")
     fields = {"planar": ("inertia", "angle"), "rigid": ("inertia", "rotation"), "point": ()}[kind]
     reader.table(table, entry, required=("name", "type", "mass", "position", *fields),
-                 optional=("simplify",) if kind == "rigid" else ())
+                 optional=("points", "simplify") if kind == "rigid" else ("points",))
     name = reader.string(table["name"], f"{entry}.name")
     mass = reader.expression(table["mass"], f"{entry}.mass")
     with reader.entry(entry):
@@ -444,10 +453,12 @@ def _rotation(reader: _Reader, value, entry: str) -> sp.Matrix:
 def _read_items(reader: _Reader, system: System, document: dict) -> None:
     """Bodies, constraints, force elements and drawing, in file order within each kind."""
     for entry, table in reader.tables(document, "bodies", required=("name", "type", "mass", "position"),
-                                      optional=("inertia", "angle", "rotation", "simplify")):
+                                      optional=("inertia", "angle", "rotation", "simplify", "points")):
         body = _body(reader, entry, table)
         with reader.entry(entry):
             system.add_body(body)
+        _read_body_points(reader, system, table.get("points", {}), body.name, f"{entry}.points")
+    _read_joints(reader, system, document)
     scalar_items: list[tuple[str, Callable]] = [
         ("constraints", system.add_constraint),
         ("nonholonomic_constraints", system.add_nonholonomic_constraint),
@@ -502,6 +513,43 @@ def _read_items(reader: _Reader, system: System, document: dict) -> None:
         point = reader.point(table["point"], f"{entry}.point")
         with reader.entry(entry):
             system.add_trace(point, name=_optional_name(reader, table, entry))
+
+
+def _read_body_points(reader: _Reader, system: System, table, body: str, entry: str) -> None:
+    """``points = {name = [body coordinates], ...}`` of a body: system points, and named points of the file."""
+    if not isinstance(table, dict):
+        raise reader.error(entry, f"expected a table of named points, got {_kind(table)}")
+    for key, value in table.items():
+        if key in reader.points:
+            raise reader.error(f"{entry}.{key}", f"the point name {key!r} is used twice")
+        local = reader.vector(value, f"{entry}.{key}", (system.dimension,))
+        with reader.entry(f"{entry}.{key}"):
+            point = system.add_point(key, body, local)
+        reader.points[key] = list(point.position)
+
+
+def _read_joints(reader: _Reader, system: System, document: dict) -> None:
+    dimension = system.dimension
+    for entry, table in reader.tables(document, "joints", required=("type", "body_a", "body_b"),
+                                      optional=("name", "at_a", "at_b", "axis", "axis_b", "angle", "rotation")):
+        options: dict[str, Any] = {}
+        for key in ("at_a", "at_b"):
+            if key in table:
+                value = table[key]
+                options[key] = value if isinstance(value, str) else reader.vector(value, f"{entry}.{key}",
+                                                                                  (dimension,))
+        for key in ("axis", "axis_b"):
+            if key in table:
+                options[key] = reader.vector(table[key], f"{entry}.{key}", (dimension,))
+        if "angle" in table:
+            options["angle"] = reader.expression(table["angle"], f"{entry}.angle")
+        if "rotation" in table:
+            options["rotation"] = _rotation(reader, table["rotation"], f"{entry}.rotation")
+        with reader.entry(entry):
+            system.add_joint(reader.string(table["type"], f"{entry}.type"),
+                             reader.string(table["body_a"], f"{entry}.body_a"),
+                             reader.string(table["body_b"], f"{entry}.body_b"),
+                             name=_optional_name(reader, table, entry), **options)
 
 
 def _optional_name(reader: _Reader, table: dict, entry: str) -> str | None:

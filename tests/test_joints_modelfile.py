@@ -1,0 +1,74 @@
+"""Body points and joints in model files: the slider-crank engine of docs/slider_crank_engine.toml
+against the built-in slider-crank, and its reactions over a driven revolution against Newton's law."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import kronlag
+from kronlag.modelfile import ModelFileError, loads_model
+from kronlag.reactions import joint_reaction
+from kronlag.workflows import inverse_dynamics_along
+
+ENGINE = Path(__file__).parents[1] / "docs" / "slider_crank_engine.toml"
+
+
+@pytest.fixture(scope="module")
+def engine():
+    model = kronlag.load_model(ENGINE)
+    return model, kronlag.derive(model.system).numeric(model.numeric_values(), backend="numpy")
+
+
+def test_engine_file_has_named_points_joints_and_constraint_rows(engine):
+    model, _ = engine
+    system = model.system
+    assert [c.name for c in system.constraints] == [
+        "main_bearing.x", "main_bearing.y", "crank_pin.x", "crank_pin.y", "wrist_pin.x", "wrist_pin.y",
+        "cylinder.normal", "cylinder.angle"]
+    assert [joint.name for joint in system.joints] == ["main_bearing", "crank_pin", "wrist_pin", "cylinder"]
+    assert system.point("crank_pin").body == "crank"
+    assert system.drawing[0].points[1] == system.point("crank_pin").position
+
+
+def test_engine_has_the_dynamics_of_the_builtin_slider_crank(engine):
+    model, numeric = engine
+    values = model.numeric_values()
+    shared = {name: values[name] for name in ("l1", "l2", "m1", "m2", "m3", "I1", "I2", "g")}
+    reference = kronlag.derive(kronlag.models.slider_crank()).numeric({**shared, "tau": 3.0}, backend="numpy")
+    numeric = kronlag.derive(model.system).numeric({**values, "tau": 3.0}, backend="numpy")
+    for crank in (0.4, 2.0, 4.0):
+        q, qd = reference.assemble([crank, -0.1, 0.2], fixed={"q1": crank}, qd_fixed={"q1": 20.0})
+        guess = np.zeros(numeric.m)
+        guess[[2, 5, 6]] = crank, q[1], q[2]
+        Q, QD = numeric.assemble(guess, fixed={"theta_crank": crank}, qd_fixed={"theta_crank": 20.0})
+        expected = reference.forward_dynamics(q, qd).qdd
+        result = numeric.forward_dynamics(Q, QD).qdd
+        assert np.allclose(result[[2, 5, 6]], expected, rtol=1e-9)
+
+
+def test_piston_obeys_newton_over_a_driven_revolution(engine):
+    """m3 a_piston = m3 g + (wrist pin force on the piston) + (cylinder force on the piston)."""
+    model, numeric = engine
+    omega = 157.0
+    times = np.linspace(0, 2 * np.pi / omega, 13)
+    run = inverse_dynamics_along(model, {"theta_crank": omega * kronlag.t}, times, numeric=numeric)
+    assert run.success
+    wrist = joint_reaction(numeric, "wrist_pin", run.t, run.q, run.lam).force
+    cylinder = joint_reaction(numeric, "cylinder", run.t, run.q, run.lam)
+    total = wrist + cylinder.force + 0.5 * np.array([0, -9.81])
+    assert np.allclose(0.5 * run.qdd[:, 6:8], total, atol=1e-9 * np.max(np.abs(wrist)))
+    assert np.allclose(cylinder.force[:, 0], 0, atol=1e-9)  # a frictionless guide pushes normal to its axis
+
+
+@pytest.mark.parametrize("change, message", [
+    (('type = "prismatic"', 'type = "hinge"'), r"joints\[3\]: joint 'cylinder': unknown 2-d joint kind 'hinge'"),
+    (('at_a = "small_end"', 'at_a = "wrist"'), r"joints\[2\].*point 'wrist' is on 'piston', not on 'rod'"),
+    (('points = {wrist = [0, 0]}', 'points = {main = [0, 0]}'), r"bodies\[2\].points.main: .*used twice"),
+    (('points = {wrist = [0, 0]}', 'points = {wrist = [0, 0, 0]}'), r"bodies\[2\].points.wrist: expected 2"),
+])
+def test_model_file_joint_errors_name_the_entry(change, message):
+    text = ENGINE.read_text()
+    assert change[0] in text
+    with pytest.raises(ModelFileError, match=message):
+        loads_model(text.replace(change[0], change[1]), source="engine.toml")
