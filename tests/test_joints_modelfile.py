@@ -1,17 +1,15 @@
-"""Body points and joints in model files: the slider-crank engine of docs/slider_crank_engine.toml
+"""Body points and joints in model files: the shipped slider-crank engine file
 against the built-in slider-crank, and its reactions over a driven revolution against Newton's law."""
-
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import kronlag
-from kronlag.modelfile import ModelFileError, loads_model
+from kronlag.modelfile import ModelFileError, example_path, loads_model
 from kronlag.reactions import joint_reaction
 from kronlag.workflows import inverse_dynamics_along
 
-ENGINE = Path(__file__).parents[1] / "docs" / "slider_crank_engine.toml"
+ENGINE = example_path("slider_crank_engine")
 
 
 @pytest.fixture(scope="module")
