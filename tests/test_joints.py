@@ -314,3 +314,39 @@ def test_spatial_spherical_against_spherical_joint():
     guess = np.concatenate([-R @ [0, 0, 0.3], angles])
     q, qd = model.assemble(guess, fixed=dict(zip(names, angles)), qd_fixed=dict(zip(names, rates)))
     assert np.allclose(model.forward_dynamics(q, qd).qdd[3:], expected, rtol=1e-9)
+
+
+def test_euler_parameter_body_moves_like_the_cardan_angle_body():
+    """A body on a spherical joint: Euler parameters (with their normalization constraint) and
+    Cardan angles give the same centre-of-mass acceleration from the same orientation and spin."""
+    from scipy.spatial.transform import Rotation
+
+    m, L, g = sp.symbols("m L g")
+    values = {"m": 1.5, "L": 0.6, "g": 9.81}
+
+    def model(rotation):
+        body = free_body("bar", mass=m, inertia=sp.diag(0.05, 0.07, 0.02), dimension=3, rotation=rotation)
+        system = mechanism([body], parameters=[m, L, g], gravity=(0, 0, -g))
+        system.add_joint("spherical", "ground", "bar", at_b=(0, 0, L / 2))
+        return kronlag.derive(system).numeric(values, backend="numpy")
+
+    cardan, quaternion = model("xyz"), model("euler_parameters")
+    assert "bar.normalization" in [c.name for c in quaternion.equations.system.constraints]
+    angles, rates = [0.3, -0.4, 0.5], [0.7, -0.2, 0.4]
+    R = np.array(euler_sequence("xyz", angles), dtype=float)
+    names = ["phi1_bar", "phi2_bar", "phi3_bar"]
+    q, qd = cardan.assemble(np.concatenate([-R @ [0, 0, 0.3], angles]), fixed=dict(zip(names, angles)),
+                            qd_fixed=dict(zip(names, rates)))
+    symbols = sp.symbols("a b c")
+    rotation = euler_sequence("xyz", symbols)
+    spin = rotation.T * sum((rotation.diff(s) * rate for s, rate in zip(symbols, rates)), sp.zeros(3))
+    spin = np.array(spin.subs(dict(zip(symbols, angles))), dtype=float)
+    omega = np.array([spin[2, 1], spin[0, 2], spin[1, 0]])  # body components
+    x, y, z, w = Rotation.from_matrix(R).as_quat()
+    e = np.array([w, x, y, z])
+    e_rate = 0.5 * np.array([-e[1:] @ omega, *(e[0] * omega + np.cross(e[1:], omega))])  # e (x) (0, omega) / 2
+    parameters = ["e0_bar", "e1_bar", "e2_bar", "e3_bar"]
+    Q, QD = quaternion.assemble(np.concatenate([q[:3], e]), fixed=dict(zip(parameters, e)),
+                                qd_guess=np.concatenate([qd[:3], e_rate]), qd_fixed=dict(zip(parameters, e_rate)))
+    assert np.allclose(quaternion.forward_dynamics(Q, QD).qdd[:3], cardan.forward_dynamics(q, qd).qdd[:3],
+                       rtol=1e-9)
