@@ -3,6 +3,7 @@ against the built-in slider-crank, and its reactions over a driven revolution ag
 
 import numpy as np
 import pytest
+import sympy
 
 import kronlag
 from kronlag.modelfile import ModelFileError, example_path, loads_model
@@ -70,3 +71,24 @@ def test_model_file_joint_errors_name_the_entry(change, message):
     assert change[0] in text
     with pytest.raises(ModelFileError, match=message):
         loads_model(text.replace(change[0], change[1]), source="engine.toml")
+
+
+def test_point_coordinates_can_be_used_in_constraints_and_forces():
+    """``crank_pin_y`` in a constraint is the world y of the named body point."""
+    text = ENGINE.read_text().replace("[[torques]]", '''[[constraints]]
+name = "pin on the axis"
+expression = "crank_pin_y"
+
+[[forces]]
+name = "push"
+point = "wrist"
+force = ["-tau*wrist_x", 0]
+
+[[torques]]''')
+    system = loads_model(text, source="engine.toml").system
+    assert system.constraints[-1].expression == system.point("crank_pin").position[1]
+    force = next(f for f in system.forces if f.name == "push")
+    assert force.value[0] == -sympy.Symbol("tau") * system.point("wrist").position[0]
+    clash = ENGINE.read_text().replace("[parameters]", "[parameters]\nwrist_x = 1.0")
+    with pytest.raises(ModelFileError, match=r"bodies\[2\].points.wrist: the coordinate names wrist_x"):
+        loads_model(clash, source="engine.toml")

@@ -20,8 +20,8 @@ Format (every table but ``coordinates`` is optional)::
     I1 = {value = "m1*l1**2/12", unit = "kg*m^2"}   # a parameter without value: {unit = "m"}
     tau = 0
 
-    [points]                                    # named points, usable wherever a point is
-    B = ["l1*cos(q1)", "l1*sin(q1)"]
+    [points]                                    # named points, usable wherever a point is; their
+    B = ["l1*cos(q1)", "l1*sin(q1)"]            # coordinates B_x, B_y (B_z) in any later expression
 
     [[bodies]]                                  # type = "planar" | "rigid" | "point"
     name = "crank"
@@ -229,6 +229,24 @@ class _Reader:
         self.source = source
         self.symbols: dict[str, sp.Symbol] = {}
         self.points: dict[str, list[sp.Expr]] = {}
+        # ``<point>_x``, ``<point>_y``, ``<point>_z`` in expressions: placeholders and their values
+        self.point_symbols: dict[str, sp.Symbol] = {}
+        self.point_values: dict[sp.Symbol, sp.Expr] = {}
+
+    def add_point(self, name: str, position: list[sp.Expr], entry: str) -> None:
+        """Register a named point, and its coordinates ``<name>_x, ...`` for expressions."""
+        if name in self.points:
+            raise self.error(entry, f"the point name {name!r} is used twice")
+        components = {f"{name}_{axis}": value for axis, value in zip("xyz", position)}
+        clash = [key for key in components if key in self.symbols]
+        if clash:
+            raise self.error(entry, f"the coordinate names {', '.join(clash)} of point {name!r} are already "
+                                    "declared symbols; rename the point")
+        self.points[name] = position
+        for key, value in components.items():
+            placeholder = sp.Dummy(key)
+            self.point_symbols[key] = placeholder
+            self.point_values[placeholder] = value
 
     def error(self, entry: str, problem: str) -> ModelFileError:
         return ModelFileError(f"{self.source}: {entry}: {problem}")
@@ -300,8 +318,10 @@ class _Reader:
             if not math.isfinite(value):
                 raise self.error(entry, f"expected a finite number, got {value}")
             return sp.Float(value)
-        return parse_expression(value, self.symbols if symbols is None else symbols,
-                                what=f"{self.source}: {entry}")
+        if symbols is not None:
+            return parse_expression(value, symbols, what=f"{self.source}: {entry}")
+        expression = parse_expression(value, self.symbols | self.point_symbols, what=f"{self.source}: {entry}")
+        return expression.xreplace(self.point_values)
 
     def vector(self, value, entry: str, lengths: Sequence[int]) -> list[sp.Expr]:
         expected = " or ".join(map(str, lengths))
@@ -370,7 +390,8 @@ def _read(document: dict, source: str) -> ModelFile:
     points = document.get("points", {})
     if not isinstance(points, dict):
         raise reader.error("points", f"expected a table of named points, got {_kind(points)}")
-    reader.points = {key: reader.vector(value, f"points.{key}", (2, 3)) for key, value in points.items()}
+    for key, value in points.items():
+        reader.add_point(key, reader.vector(value, f"points.{key}", (2, 3)), f"points.{key}")
 
     _read_items(reader, system, document)
     model = ModelFile(system=system, description=description, values=values, units=units, source=source)
@@ -525,7 +546,7 @@ def _read_body_points(reader: _Reader, system: System, table, body: str, entry: 
         local = reader.vector(value, f"{entry}.{key}", (system.dimension,))
         with reader.entry(f"{entry}.{key}"):
             point = system.add_point(key, body, local)
-        reader.points[key] = list(point.position)
+        reader.add_point(key, list(point.position), f"{entry}.{key}")
 
 
 def _read_joints(reader: _Reader, system: System, document: dict) -> None:
