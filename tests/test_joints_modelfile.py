@@ -58,6 +58,7 @@ def test_piston_obeys_newton_over_a_driven_revolution(engine):
     total = wrist + cylinder.force + 0.5 * np.array([0, -9.81])
     assert np.allclose(0.5 * run.qdd[:, 6:8], total, atol=1e-9 * np.max(np.abs(wrist)))
     assert np.allclose(cylinder.force[:, 0], 0, atol=1e-9)  # a frictionless guide pushes normal to its axis
+    assert np.array_equal(run.columns()["wrist_pin.Fy"], wrist[:, 1])
 
 
 @pytest.mark.parametrize("change, message", [

@@ -10,7 +10,7 @@ and :func:`inverse_dynamics_along` use the numeric layer
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -21,6 +21,7 @@ from .derivation import derive
 from .equations import Equations
 from .expressions import parse_expression
 from .modelfile import ModelFile
+from .reactions import reaction_columns
 from .system import ModelError, t
 
 if TYPE_CHECKING:
@@ -251,6 +252,9 @@ class InverseDynamicsRun:
         Rows up to the first failure (if any).
     message : str
         Empty on success; otherwise why the run stopped.
+    reactions : dict of str to (N,) arrays
+        The joints' reactions in world components, named as in
+        :func:`kronlag.reactions.reaction_columns` (``main_bearing.Fx``, ...).
     """
 
     actuated: tuple[str, ...]
@@ -263,6 +267,7 @@ class InverseDynamicsRun:
     lam: np.ndarray
     mu: np.ndarray
     message: str = ""
+    reactions: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def success(self) -> bool:
@@ -270,14 +275,16 @@ class InverseDynamicsRun:
         return not self.message
 
     def columns(self) -> dict[str, np.ndarray]:
-        """``t``, coordinates, speeds, accelerations, ``force_<q>``, ``lambda<j>``, ``mu<k>``."""
+        """``t``, coordinates, speeds, accelerations, ``force_<q>``, ``lambda<j>``, ``mu<k>``, then
+        the joints' reactions (``<joint>.Fx``, ...)."""
         blocks = [(["t"], self.t[:, None]), (list(self.coordinate_names), self.q),
                   ([f"{n}d" for n in self.coordinate_names], self.qd),
                   ([f"{n}dd" for n in self.coordinate_names], self.qdd),
                   ([f"force_{n}" for n in self.actuated], self.forces),
                   ([f"lambda{j + 1}" for j in range(self.lam.shape[1])], self.lam),
                   ([f"mu{k + 1}" for k in range(self.mu.shape[1])], self.mu)]
-        return {label: values[:, i] for labels, values in blocks for i, label in enumerate(labels)}
+        columns = {label: values[:, i] for labels, values in blocks for i, label in enumerate(labels)}
+        return columns | self.reactions
 
     def save(self, path: str | Path) -> None:
         """Write the columns to ``.csv`` or ``.npz`` (by the suffix)."""
@@ -361,4 +368,5 @@ def inverse_dynamics_along(model: ModelFile, drives: Mapping[str, sp.Expr], time
     widths = ((), (numeric.m,), (numeric.m,), (numeric.m,), (len(drives),), (numeric.r,), (numeric.s,))
     arrays = [np.array([row[k] for row in rows], dtype=float).reshape(len(rows), *width)
               for k, width in enumerate(widths)]
-    return InverseDynamicsRun(tuple(drives), names, *arrays, message=message)
+    reactions = reaction_columns(numeric, arrays[0], arrays[1], arrays[5])
+    return InverseDynamicsRun(tuple(drives), names, *arrays, message=message, reactions=reactions)
