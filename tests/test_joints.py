@@ -48,8 +48,10 @@ def test_planar_joint_rows_match_hand_derivations():
     }
     suffixes = {"revolute": ["x", "y"], "pin_in_slot": ["normal"], "prismatic": ["normal", "angle"],
                 "rigid": ["x", "y", "angle"]}
+    options = {"revolute": {}, "pin_in_slot": {"axis": (u1, u2)}, "prismatic": {"axis": (u1, u2), "angle": beta},
+               "rigid": {"angle": beta}}
     for kind, hand in expected.items():
-        joint = system.add_joint(kind, "a", "b", at_a=(s1, s2), at_b=(s3, s4), axis=(u1, u2), angle=beta)
+        joint = system.add_joint(kind, "a", "b", at_a=(s1, s2), at_b=(s3, s4), **options[kind])
         assert joint.name == f"a_b_{kind}"
         assert joint.constraint_names == tuple(f"a_b_{kind}.{s}" for s in suffixes[kind])
         assert [sp.simplify(x - y) for x, y in zip(rows(system, joint), hand)] == [0] * len(hand)
@@ -72,6 +74,7 @@ def test_named_points_serve_as_joint_points():
     (("revolute", "a", "ground"), "put the ground first"),
     (("revolute", "a", "a"), "to itself"),
     (("prismatic", "a", "b"), "needs axis"),
+    (("revolute", "a", "b", {"axis": (1, 0)}), "a 2-d revolute joint does not use axis"),
     (("rigid", "a", "p"), "point mass without one"),
     (("revolute", "a", "b", {"at_a": (1, 2, 3)}), "expected 2 entries, got 3"),
 ])

@@ -141,23 +141,24 @@ class _Kind:
     rows: tuple[Callable[[_Pose, _Pose, _Geometry], Rows], ...]
     needs: tuple[str, ...] = ()  # geometry the kind needs: "axis", "axis_b"
     turns: bool = False  # uses the orientation of both bodies (not for point masses)
+    accepts: tuple[str, ...] = ()  # optional geometry it uses: "axis_b", "angle", "rotation"
 
 
 #: Joint kinds by dimension and name.
 JOINT_KINDS: dict[int, dict[str, _Kind]] = {
     2: {
         "revolute": _Kind((_coincident,)),
-        "prismatic": _Kind((_planar_normal, _planar_angle), ("axis",), turns=True),
+        "prismatic": _Kind((_planar_normal, _planar_angle), ("axis",), turns=True, accepts=("angle",)),
         "pin_in_slot": _Kind((_planar_normal,), ("axis",)),
-        "rigid": _Kind((_coincident, _planar_angle), turns=True),
+        "rigid": _Kind((_coincident, _planar_angle), turns=True, accepts=("angle",)),
     },
     3: {
         "spherical": _Kind((_coincident,)),
-        "revolute": _Kind((_coincident, _axis_alignment), ("axis", "axis_b"), turns=True),
-        "cylindrical": _Kind((_spatial_normal, _axis_alignment), ("axis", "axis_b"), turns=True),
-        "prismatic": _Kind((_spatial_normal, _orientation_lock), ("axis",), turns=True),
+        "revolute": _Kind((_coincident, _axis_alignment), ("axis",), turns=True, accepts=("axis_b",)),
+        "cylindrical": _Kind((_spatial_normal, _axis_alignment), ("axis",), turns=True, accepts=("axis_b",)),
+        "prismatic": _Kind((_spatial_normal, _orientation_lock), ("axis",), turns=True, accepts=("rotation",)),
         "universal": _Kind((_coincident, _cross_axes), ("axis", "axis_b"), turns=True),
-        "rigid": _Kind((_coincident, _orientation_lock), turns=True),
+        "rigid": _Kind((_coincident, _orientation_lock), turns=True, accepts=("rotation",)),
     },
 }
 
@@ -301,11 +302,17 @@ def add_joint(system: System, kind: str, body_a: str, body_b: str, *, at_a=None,
         if body != GROUND and spec.turns and isinstance(system.body(body), PointMass):
             raise ModelError(f"{what}: a {kind} joint holds the orientation of its bodies, but {body!r} is a "
                              "point mass without one")
-    if axis_b is None and kind != "universal":
+    given = {"axis": axis, "axis_b": axis_b, "angle": None if angle == 0 else angle, "rotation": rotation}
+    unused = [key for key, value in given.items() if value is not None and key not in (*spec.needs, *spec.accepts)]
+    if unused:
+        raise ModelError(f"{what}: a {dimension}-d {kind} joint does not use {', '.join(unused)}")
+    missing = [key for key in spec.needs if given[key] is None]
+    if missing:
+        raise ModelError(f"{what}: a {dimension}-d {kind} joint needs {', '.join(f'{key}=...' for key in missing)}")
+    if axis_b is None and "axis_b" in spec.accepts:
         axis_b = axis
-    for needed, value in (("axis", axis), ("axis_b", axis_b)):
-        if needed in spec.needs and value is None:
-            raise ModelError(f"{what}: a {dimension}-d {kind} joint needs {needed}=...")
+    if rotation is not None and sp.Matrix(rotation).shape != (3, 3):
+        raise ModelError(f"{what}: rotation must be a 3x3 matrix, got shape {sp.Matrix(rotation).shape}")
     zero = (0,) * dimension
     geometry = _Geometry(
         at_a=_local(system, zero if at_a is None else at_a, body_a, dimension, f"{what} at_a"),
