@@ -3,10 +3,10 @@ against the built-in slider-crank, and its reactions over a driven revolution ag
 
 import numpy as np
 import pytest
-import sympy
+import sympy as sp
 
 import kronlag
-from kronlag.modelfile import ModelFileError, example_path, loads_model
+from kronlag.modelfile import ModelFileError, example_path, loads_model, to_toml
 from kronlag.reactions import joint_reaction
 from kronlag.workflows import inverse_dynamics_along
 
@@ -89,7 +89,21 @@ force = ["-tau*wrist_x", 0]
     system = loads_model(text, source="engine.toml").system
     assert system.constraints[-1].expression == system.point("crank_pin").position[1]
     force = next(f for f in system.forces if f.name == "push")
-    assert force.value[0] == -sympy.Symbol("tau") * system.point("wrist").position[0]
+    assert force.value[0] == -sp.Symbol("tau") * system.point("wrist").position[0]
     clash = ENGINE.read_text().replace("[parameters]", "[parameters]\nwrist_x = 1.0")
     with pytest.raises(ModelFileError, match=r"bodies\[2\].points.wrist: the coordinate names wrist_x"):
         loads_model(clash, source="engine.toml")
+
+
+def test_written_engine_reads_back_with_its_points_and_joints():
+    written = to_toml(kronlag.models.slider_crank_engine())
+    assert "[[joints]]" in written and "crank_pin.x" not in written
+    again = loads_model(written, source="written.toml").system
+    original = kronlag.models.slider_crank_engine()
+    assert [j.name for j in again.joints] == [j.name for j in original.joints]
+    assert [c.name for c in again.constraints] == [c.name for c in original.constraints]
+    assert [sp.simplify(a.expression - b.expression) for a, b in zip(again.constraints, original.constraints)] \
+        == [0] * len(original.constraints)
+    assert {name: point.position for name, point in again.points.items()} == \
+        {name: point.position for name, point in original.points.items()}
+    assert [j.wrench for j in again.joints] == [j.wrench for j in original.joints]

@@ -181,6 +181,10 @@ class Joint:
     wrench : (d + d_rot, k)
         ``W(q)``: ``[F; T] = W lambda_J`` is the wrench A exerts on B (world
         components; ``d_rot`` is 1 planar, 3 spatial).
+    geometry : tuple of (str, value)
+        The geometry it was added with (``at_a``, ``at_b`` as body coordinates, and
+        whichever of ``axis``, ``axis_b``, ``angle``, ``rotation`` its kind uses), so
+        that ``add_joint(kind, body_a, body_b, name=name, **dict(geometry))`` adds it again.
     """
 
     name: str
@@ -191,6 +195,7 @@ class Joint:
     point: sp.ImmutableMatrix
     rotation_b: sp.ImmutableMatrix
     wrench: sp.ImmutableMatrix
+    geometry: tuple[tuple[str, object], ...] = ()
 
     @property
     def dimension(self) -> int:
@@ -339,8 +344,13 @@ def add_joint(system: System, kind: str, body_a: str, body_b: str, *, at_a=None,
         raise ModelError(f"{what}: constraint name(s) {clash} already used")
     for constraint_name, (_, expression) in zip(constraint_names, rows):
         system.add_constraint(expression, name=constraint_name)
+    stored = {"at_a": geometry.at_a, "at_b": geometry.at_b, "axis": geometry.axis, "axis_b": geometry.axis_b,
+              "angle": geometry.angle, "rotation": geometry.rotation}
+    kept = tuple((key, sp.ImmutableMatrix(stored[key]) if key != "angle" else stored[key])
+                 for key in ("at_a", "at_b", *spec.needs, *spec.accepts) if key in ("at_a", "at_b")
+                 or given[key] is not None)
     joint = Joint(name, kind, body_a, body_b, constraint_names, sp.ImmutableMatrix(joint_point),
-                  sp.ImmutableMatrix(pose_b.rotation), sp.ImmutableMatrix(wrench))
+                  sp.ImmutableMatrix(pose_b.rotation), sp.ImmutableMatrix(wrench), kept)
     system.joints.append(joint)
     return joint
 

@@ -732,8 +732,20 @@ def _document(model: ModelFile) -> dict[str, Any]:
             entry["unit"] = model.units[symbol.name]
         parameters[symbol.name] = entry
     document["parameters"] = parameters
+    points = {body: {name: writer.vector(point.local) for name, point in system.points.items() if point.body == body}
+              for body in ("ground", *(body.name for body in system.bodies))}
+    if points["ground"]:
+        document["points"] = points["ground"]
     document["bodies"] = [_body_document(writer, body) for body in system.bodies]
-    for key, items in (("constraints", system.constraints),
+    for entry in document["bodies"]:
+        if points[entry["name"]]:
+            entry["points"] = points[entry["name"]]
+    document["joints"] = [{"name": joint.name, "type": joint.kind, "body_a": joint.body_a, "body_b": joint.body_b,
+                           **{key: writer.expression(value) if key == "angle" else
+                              writer.matrix(value) if key == "rotation" else writer.vector(value)
+                              for key, value in joint.geometry}} for joint in system.joints]
+    joint_rows = {row for joint in system.joints for row in joint.constraint_names}
+    for key, items in (("constraints", [c for c in system.constraints if c.name not in joint_rows]),
                        ("nonholonomic_constraints", system.nonholonomic_constraints),
                        ("potentials", system.potentials)):
         document[key] = [{"name": item.name, "expression": writer.expression(item.expression)} for item in items]
