@@ -120,3 +120,15 @@ def test_named_points_numerically_against_finite_differences():
     assert np.allclose(state["velocity"], (path(h) - path(-h)) / (2 * h), atol=1e-8)
     assert np.allclose(state["acceleration"], (path(h) - 2 * path(0) + path(-h)) / h ** 2, atol=1e-4)
     assert np.allclose(model.point_position("pivot D", q), [0.5, 0.0])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_euler_parameters_of_inverts_euler_parameters(seed):
+    rng = np.random.default_rng(seed)
+    e = rng.normal(size=4)
+    e[rng.integers(4)] *= 20  # each of e0..e3 the largest in turn (rotations near 180 degrees too)
+    e = e / np.linalg.norm(e) * np.sign(e[0])
+    R = np.array(frames.euler_parameters(*e), dtype=float)
+    assert np.allclose(frames.euler_parameters_of(R), e, atol=1e-12)
+    with pytest.raises(ModelError, match="rotation matrix"):
+        frames.euler_parameters_of(2 * R)

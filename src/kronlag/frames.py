@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
 import sympy as sp
 
 from .calculus import time_derivative
@@ -38,6 +39,7 @@ __all__ = [
     "euler_sequence",
     "euler_parameters",
     "euler_parameter_constraint",
+    "euler_parameters_of",
     "skew",
     "Frame",
     "body_frame",
@@ -138,6 +140,33 @@ def euler_parameters(e0, e1, e2, e3) -> sp.Matrix:
 def euler_parameter_constraint(e0, e1, e2, e3) -> sp.Expr:
     """The normalization constraint ``e0^2 + e1^2 + e2^2 + e3^2 - 1 = 0`` of Euler parameters."""
     return e0 ** 2 + e1 ** 2 + e2 ** 2 + e3 ** 2 - 1
+
+
+def euler_parameters_of(rotation) -> np.ndarray:
+    """Euler parameters ``(e0, e1, e2, e3)``, ``e0 >= 0``, of a numeric rotation matrix, shape (4,).
+
+    The inverse of :func:`euler_parameters` (for initial guesses of bodies placed by
+    Euler parameters); the largest of ``e0^2 .. e3^2`` is taken from the diagonal
+    first, which keeps the result accurate for every rotation.
+
+    >>> euler_parameters_of(np.array(elementary_rotation("z", np.pi / 2), dtype=float)).round(6)
+    array([0.707107, 0.      , 0.      , 0.707107])
+    """
+    R = np.asarray(rotation, dtype=float)
+    if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
+        raise ModelError(f"euler_parameters_of: expected a 3x3 rotation matrix, got {R.tolist()}")
+    squares = 0.25 * (1 + np.array([np.trace(R), 2 * R[0, 0] - np.trace(R), 2 * R[1, 1] - np.trace(R),
+                                    2 * R[2, 2] - np.trace(R)]))
+    k = int(np.argmax(squares))
+    e = np.empty(4)
+    e[k] = np.sqrt(squares[k])
+    # off-diagonal sums and differences: 4 e0 e_i = R_kj - R_jk, 4 e_i e_j = R_ij + R_ji
+    products = {(0, 1): R[2, 1] - R[1, 2], (0, 2): R[0, 2] - R[2, 0], (0, 3): R[1, 0] - R[0, 1],
+                (1, 2): R[0, 1] + R[1, 0], (1, 3): R[0, 2] + R[2, 0], (2, 3): R[1, 2] + R[2, 1]}
+    for (i, j), value in products.items():
+        if k in (i, j):
+            e[j if k == i else i] = value / (4 * e[k])
+    return e if e[0] >= 0 else -e
 
 
 def _vector(value, what: str, length: int) -> sp.Matrix:
