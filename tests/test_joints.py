@@ -76,6 +76,7 @@ def test_named_points_serve_as_joint_points():
     (("prismatic", "a", "b"), "needs axis"),
     (("revolute", "a", "b", {"axis": (1, 0)}), "a 2-d revolute joint does not use axis"),
     (("rigid", "a", "p"), "point mass without one"),
+    (("pin_in_slot", "p", "a", {"axis": (1, 0)}), "fixed in body_a, but 'p' is a point mass"),
     (("revolute", "a", "b", {"at_a": (1, 2, 3)}), "expected 2 entries, got 3"),
 ])
 def test_joint_errors_name_the_joint_and_the_problem(arguments, message):

@@ -307,6 +307,9 @@ def add_joint(system: System, kind: str, body_a: str, body_b: str, *, at_a=None,
         if body != GROUND and spec.turns and isinstance(system.body(body), PointMass):
             raise ModelError(f"{what}: a {kind} joint holds the orientation of its bodies, but {body!r} is a "
                              "point mass without one")
+    if body_a != GROUND and "axis" in spec.needs and isinstance(system.body(body_a), PointMass):
+        raise ModelError(f"{what}: the axis of a {kind} joint is fixed in body_a, but {body_a!r} is a point mass "
+                         "without an orientation")
     given = {"axis": axis, "axis_b": axis_b, "angle": None if angle == 0 else angle, "rotation": rotation}
     unused = [key for key, value in given.items() if value is not None and key not in (*spec.needs, *spec.accepts)]
     if unused:
