@@ -138,3 +138,17 @@ def test_trajectory_reactions_by_name_and_as_columns(tmp_path):
         trajectory.reaction("crank_rod")
     with pytest.raises(ValueError, match="frame must be"):
         trajectory.reaction("crank_coupler_revolute", frame="crank")
+
+
+def test_reaction_plot_has_a_row_per_joint(tmp_path):
+    model = numeric(four_bar_by_joints, "four_bar")
+    start = np.zeros(model.m)
+    start[[2, 5, 8]] = [1.0, 0.5, 1.5]
+    q, qd = model.assemble(start, fixed={"theta_crank": 1.0}, qd_fixed={"theta_crank": 6.0})
+    trajectory = kronlag.simulate(model, (0, 0.2), q, qd, method="projection", t_eval=np.linspace(0, 0.2, 5))
+    figure = trajectory.plot_reactions(path=tmp_path / "reactions.png")
+    assert len(figure.axes) == 2 * len(model.equations.system.joints)
+    assert (tmp_path / "reactions.png").stat().st_size > 10_000
+    assert len(trajectory.plot_reactions(["crank_coupler_revolute"], frame="body").axes) == 2
+    with pytest.raises(KeyError, match="no joint named"):
+        trajectory.plot_reactions(["crank"])

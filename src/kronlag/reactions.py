@@ -16,14 +16,16 @@ spatial ones ``F = (Fx, Fy, Fz)`` and ``T = (Mx, My, Mz)``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from os import PathLike
 
 import numpy as np
 import sympy as sp
 
 from .joints import Joint
 
-__all__ = ["Reaction", "joint_reaction", "reaction_columns"]
+__all__ = ["Reaction", "joint_reaction", "reaction_columns", "plot_reactions"]
 
 _FRAMES = ("world", "body")
 
@@ -117,3 +119,38 @@ def reaction_columns(model, t, q, lam) -> dict[str, np.ndarray]:
         columns.update({f"{joint.name}.F{axis}": reaction.force[:, i] for i, axis in enumerate(force_names)})
         columns.update({f"{joint.name}.M{axis}": reaction.torque[:, i] for i, axis in enumerate(torque_names)})
     return columns
+
+
+def plot_reactions(trajectory, joints: Sequence[str] | None = None, *, frame: str = "world",
+                   path: str | PathLike | None = None):
+    """Plot the reactions of ``joints`` (default: every joint) over time, one row per joint:
+    the force components ``F`` and ``|F|`` on the left, the couple ``T`` on the right.
+
+    Returns the :class:`matplotlib.figure.Figure` (standalone, no GUI backend needed);
+    with ``path`` it is also saved there.
+    """
+    from matplotlib.figure import Figure
+
+    system = trajectory.model.equations.system
+    names = [joint.name for joint in system.joints] if joints is None else list(joints)
+    if not names:
+        raise ValueError(f"{system.name} has no joints to plot the reactions of")
+    figure = Figure(figsize=(12.0, 2.8 * len(names)), layout="constrained")
+    axes = figure.subplots(len(names), 2, squeeze=False, sharex=True)
+    for (forces, couples), name in zip(axes, names):
+        reaction = joint_reaction(trajectory.model, name, trajectory.t, trajectory.q, trajectory.lam, frame=frame)
+        for i, axis in enumerate("xyz"[:reaction.force.shape[1]]):
+            forces.plot(trajectory.t, reaction.force[:, i], label=f"$F_{axis}$")
+        forces.plot(trajectory.t, np.linalg.norm(reaction.force, axis=1), "k--", label="$|F|$")
+        for i, axis in enumerate("z" if reaction.torque.shape[1] == 1 else "xyz"):
+            couples.plot(trajectory.t, reaction.torque[:, i], label=f"$M_{axis}$")
+        forces.set_title(f"{name}: force on {_joint(system, name).body_b} ({frame} frame)")
+        couples.set_title(f"{name}: couple")
+        for panel in (forces, couples):
+            panel.legend(loc="upper right", fontsize="small")
+            panel.grid(True, alpha=0.3)
+    for panel in axes[-1]:
+        panel.set_xlabel("t")
+    if path is not None:
+        figure.savefig(path, dpi=100)
+    return figure

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .reactions import Reaction, joint_reaction, reaction_columns
+from .reactions import Reaction, joint_reaction, plot_reactions, reaction_columns
 
 if TYPE_CHECKING:
     from .numeric import NumericModel
@@ -174,6 +174,10 @@ class Trajectory:
         from .plotting import plot_trajectory
 
         return plot_trajectory(self, **kwargs)
+
+    def plot_reactions(self, joints=None, **kwargs):
+        """Plot joint reactions over time; see :func:`kronlag.reactions.plot_reactions`."""
+        return plot_reactions(self, joints, **kwargs)
 
     def animate(self, path=None, **kwargs):
         """Animate the mechanism; see :func:`kronlag.animation.animate`."""
