@@ -11,11 +11,13 @@ with time along the first axis of every array, and exports it as columns.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from os import PathLike
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .energy import nonconservative_work
 from .reactions import Reaction, joint_reaction, plot_reactions, reaction_columns
 
 if TYPE_CHECKING:
@@ -106,6 +108,19 @@ class Trajectory:
     def total_energy(self) -> np.ndarray:
         """``T + Pi``, shape (N,)."""
         return self.kinetic_energy + self.potential_energy
+
+    @cached_property
+    def nonconservative_work(self) -> np.ndarray:
+        """``W(t) = integral qd^T f_Q dt`` from ``t[0]``: the work of applied forces and torques,
+        dampers and generalized forces, shape (N,); see :mod:`kronlag.energy`."""
+        return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd)
+
+    @property
+    def energy_balance(self) -> np.ndarray:
+        """``E(t) - E(t0) - W(t)``, shape (N,): zero up to the integration error, also for driven and
+        damped models (``E = T + Pi``)."""
+        energy = self.total_energy
+        return energy - energy[:1] - self.nonconservative_work
 
     def __len__(self) -> int:
         return len(self.t)

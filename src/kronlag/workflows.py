@@ -176,10 +176,13 @@ class SimulationSummary:
     position_drift, velocity_drift : float
         ``max |Phi(q)|`` and ``max |[Phi_q qd; A qd + b]|`` over the run.
     energy_drift : float
-        ``max |E(t) - E(0)|`` of the total energy ``T + Pi`` (a conservation
-        check only for models without driving or dissipative forces).
+        ``max |E(t) - E(0) - W(t)|``: the total energy ``E = T + Pi`` against the work
+        ``W`` of the non-conservative forces (:attr:`Trajectory.energy_balance`), zero up to
+        the integration error for driven and damped models too.
     relative_energy_drift : float
-        ``energy_drift`` over ``max(|E|)`` (0 if the energy is 0 throughout).
+        ``energy_drift`` over ``max(|E|, |W|)`` (0 if both are 0 throughout).
+    work : float
+        ``W`` at the last time: the work of applied forces, torques and dampers.
     wall_time : float
         Seconds.
     """
@@ -195,6 +198,7 @@ class SimulationSummary:
     energy_drift: float
     relative_energy_drift: float
     wall_time: float
+    work: float = 0.0
 
     def report(self) -> str:
         """A few lines of text for people."""
@@ -203,7 +207,8 @@ class SimulationSummary:
             f"status: {status}",
             f"method {self.method}: {self.steps} steps, {self.points} output points, t = 0 .. {self.t_final:g}",
             f"max constraint drift: position {self.position_drift:.3g}, velocity {self.velocity_drift:.3g}",
-            f"energy drift: {self.energy_drift:.3g} (relative {self.relative_energy_drift:.3g})",
+            f"energy drift: {self.energy_drift:.3g} (relative {self.relative_energy_drift:.3g}; "
+            f"E(t) - E(0) - W(t) with the work of non-conservative forces W = {self.work:.6g})",
             f"wall time: {self.wall_time:.3g} s",
         ])
 
@@ -214,15 +219,17 @@ def _largest(values: np.ndarray) -> float:
 
 def summarize(trajectory: Trajectory) -> SimulationSummary:
     """Steps, constraint and energy drift and wall time of a trajectory."""
-    energy = trajectory.kinetic_energy + trajectory.potential_energy
-    drift = _largest(energy - energy[0]) if energy.size else 0.0
-    scale = _largest(energy)
+    energy = trajectory.total_energy
+    work = trajectory.nonconservative_work if energy.size else energy
+    drift = _largest(trajectory.energy_balance) if energy.size else 0.0
+    scale = max(_largest(energy), _largest(work))
     return SimulationSummary(
         success=trajectory.success, message=trajectory.message, method=trajectory.method,
         steps=trajectory.steps, points=len(trajectory.t),
         t_final=float(trajectory.t[-1]) if len(trajectory.t) else 0.0,
         position_drift=_largest(trajectory.position_residual), velocity_drift=_largest(trajectory.velocity_residual),
-        energy_drift=drift, relative_energy_drift=drift / scale if scale else 0.0, wall_time=trajectory.wall_time)
+        energy_drift=drift, relative_energy_drift=drift / scale if scale else 0.0, wall_time=trajectory.wall_time,
+        work=float(work[-1]) if work.size else 0.0)
 
 
 # -- inverse dynamics -----------------------------------------------------------------
