@@ -30,6 +30,7 @@ EXAMPLES = {
     "quick_return": "quick_return",
     "double_pendulum": "double_pendulum",
     "slider_crank": "slider_crank",
+    "slider_crank_engine": "slider_crank_engine",
     "heavy_top": "heavy_top",
     "chaplygin_sleigh": "chaplygin_sleigh",
     "closed_chain_4": "closed_chain_4_absolute",

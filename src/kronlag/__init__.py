@@ -6,7 +6,7 @@ Kronecker-product matrix form of Lagrange's equations with multipliers
     f(q) = 0,   A(q) qd + b(q) = 0
 """
 
-from . import calculus, models
+from . import calculus, frames, joints, models
 from .derivation import derive
 from .equations import Equations
 from .modelfile import load_model
@@ -21,6 +21,9 @@ from .numeric import (
 )
 from .simulation import simulate
 from .trajectory import Trajectory
+from .reactions import Reaction
+from .joints import FreeBody, Joint, free_body, mechanism
+from .frames import Frame
 from .system import (
     Damper,
     ModelError,
@@ -39,7 +42,15 @@ __version__ = "0.1.0"
 
 __all__ = [
     "calculus",
+    "frames",
+    "joints",
     "models",
+    "Frame",
+    "Joint",
+    "FreeBody",
+    "free_body",
+    "mechanism",
+    "Reaction",
     "derive",
     "Equations",
     "load_model",

@@ -51,7 +51,7 @@ import stat
 import subprocess
 import sys
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
@@ -339,6 +339,15 @@ class KernelSource:
         matrices = [self.matrix(block) for block in names]
         blocks = tuple(Block(block, (len(rows), len(rows[0]) if rows else self._columns(block)))
                        for block, rows in zip(names, matrices))
+        return self._cse_kernel(name, blocks, matrices)
+
+    def expression_kernel(self, name: str, matrices: Mapping[str, sp.MatrixBase]) -> Kernel:
+        """A kernel of further expressions of ``(t, q, qd, parameters)`` (body points, joint
+        reactions), one block per entry of ``matrices``."""
+        blocks = tuple(Block(block, matrix.shape) for block, matrix in matrices.items())
+        return self._cse_kernel(name, blocks, [self.convert.matrix(matrix) for matrix in matrices.values()])
+
+    def _cse_kernel(self, name: str, blocks: tuple[Block, ...], matrices: list[list[list[se.Basic]]]) -> Kernel:
         flat = [entry for rows in matrices for row in rows for entry in row]
         temporaries, outputs = se.cse(flat) if flat else ([], [])
         return Kernel(name, blocks, tuple(temporaries), tuple(outputs), dict(self.convert.constants))

@@ -20,8 +20,8 @@ Format (every table but ``coordinates`` is optional)::
     I1 = {value = "m1*l1**2/12", unit = "kg*m^2"}   # a parameter without value: {unit = "m"}
     tau = 0
 
-    [points]                                    # named points, usable wherever a point is
-    B = ["l1*cos(q1)", "l1*sin(q1)"]
+    [points]                                    # named points, usable wherever a point is; their
+    B = ["l1*cos(q1)", "l1*sin(q1)"]            # coordinates B_x, B_y (B_z) in any later expression
 
     [[bodies]]                                  # type = "planar" | "rigid" | "point"
     name = "crank"
@@ -31,6 +31,15 @@ Format (every table but ``coordinates`` is optional)::
     position = ["l1/2*cos(q1)", "l1/2*sin(q1)"]
     angle = "q1"                                # rigid: rotation = 3x3 matrix or
                                                 # {axes = "zxz", angles = ["psi", "theta", "phi"]}
+    points = {B = ["l1/2", 0]}                  # named points in body coordinates (from the centre
+                                                # of mass, body axes), usable wherever a point is
+    [[joints]]                                  # kronlag.joints: type, body_a ("ground" or a body),
+    type = "revolute"                           # body_b; optional name, at_a, at_b (body coordinates
+    body_a = "crank"                            # or the name of a point of that body), axis, axis_b,
+    body_b = "coupler"                          # angle, rotation; adds the rows "<name>.x", ...
+    at_a = "B"
+    at_b = ["-l2/2", 0]
+
     [[constraints]]                             # f(q) = 0
     name = "loop x"
     expression = "l1*cos(q1) + l2*cos(q2) - l3*cos(q3) - l4"
@@ -220,6 +229,24 @@ class _Reader:
         self.source = source
         self.symbols: dict[str, sp.Symbol] = {}
         self.points: dict[str, list[sp.Expr]] = {}
+        # ``<point>_x``, ``<point>_y``, ``<point>_z`` in expressions: placeholders and their values
+        self.point_symbols: dict[str, sp.Symbol] = {}
+        self.point_values: dict[sp.Symbol, sp.Expr] = {}
+
+    def add_point(self, name: str, position: list[sp.Expr], entry: str) -> None:
+        """Register a named point, and its coordinates ``<name>_x, ...`` for expressions."""
+        if name in self.points:
+            raise self.error(entry, f"the point name {name!r} is used twice")
+        components = {f"{name}_{axis}": value for axis, value in zip("xyz", position)}
+        clash = [key for key in components if key in self.symbols]
+        if clash:
+            raise self.error(entry, f"the coordinate names {', '.join(clash)} of point {name!r} are already "
+                                    "declared symbols; rename the point")
+        self.points[name] = position
+        for key, value in components.items():
+            placeholder = sp.Dummy(key)
+            self.point_symbols[key] = placeholder
+            self.point_values[placeholder] = value
 
     def error(self, entry: str, problem: str) -> ModelFileError:
         return ModelFileError(f"{self.source}: {entry}: {problem}")
@@ -291,8 +318,10 @@ class _Reader:
             if not math.isfinite(value):
                 raise self.error(entry, f"expected a finite number, got {value}")
             return sp.Float(value)
-        return parse_expression(value, self.symbols if symbols is None else symbols,
-                                what=f"{self.source}: {entry}")
+        if symbols is not None:
+            return parse_expression(value, symbols, what=f"{self.source}: {entry}")
+        expression = parse_expression(value, self.symbols | self.point_symbols, what=f"{self.source}: {entry}")
+        return expression.xreplace(self.point_values)
 
     def vector(self, value, entry: str, lengths: Sequence[int]) -> list[sp.Expr]:
         expected = " or ".join(map(str, lengths))
@@ -341,7 +370,7 @@ def _read(document: dict, source: str) -> ModelFile:
     reader.table(document, "", required=("coordinates",), optional=(
         "name", "description", "gravity", "parameters", "points", "bodies", "constraints",
         "nonholonomic_constraints", "springs", "dampers", "potentials", "forces", "torques",
-        "generalized_forces", "initial", "simulation", "drives", "drawing", "traces"))
+        "generalized_forces", "initial", "simulation", "drives", "drawing", "traces", "joints"))
     name = reader.string(document.get("name", Path(source).stem), "name")
     description = reader.string(document.get("description", ""), "description")
     coordinate_list = document["coordinates"]
@@ -361,7 +390,8 @@ def _read(document: dict, source: str) -> ModelFile:
     points = document.get("points", {})
     if not isinstance(points, dict):
         raise reader.error("points", f"expected a table of named points, got {_kind(points)}")
-    reader.points = {key: reader.vector(value, f"points.{key}", (2, 3)) for key, value in points.items()}
+    for key, value in points.items():
+        reader.add_point(key, reader.vector(value, f"points.{key}", (2, 3)), f"points.{key}")
 
     _read_items(reader, system, document)
     model = ModelFile(system=system, description=description, values=values, units=units, source=source)
@@ -401,7 +431,7 @@ def _body(reader: _Reader, entry: str, table: dict) -> PlanarBody | RigidBody | 
         raise reader.error(f"{entry}.type", f"expected one of {', '.join(_BODY_TYPES)}, got {kind!r}")
     fields = {"planar": ("inertia", "angle"), "rigid": ("inertia", "rotation"), "point": ()}[kind]
     reader.table(table, entry, required=("name", "type", "mass", "position", *fields),
-                 optional=("simplify",) if kind == "rigid" else ())
+                 optional=("points", "simplify") if kind == "rigid" else ("points",))
     name = reader.string(table["name"], f"{entry}.name")
     mass = reader.expression(table["mass"], f"{entry}.mass")
     with reader.entry(entry):
@@ -444,10 +474,12 @@ def _rotation(reader: _Reader, value, entry: str) -> sp.Matrix:
 def _read_items(reader: _Reader, system: System, document: dict) -> None:
     """Bodies, constraints, force elements and drawing, in file order within each kind."""
     for entry, table in reader.tables(document, "bodies", required=("name", "type", "mass", "position"),
-                                      optional=("inertia", "angle", "rotation", "simplify")):
+                                      optional=("inertia", "angle", "rotation", "simplify", "points")):
         body = _body(reader, entry, table)
         with reader.entry(entry):
             system.add_body(body)
+        _read_body_points(reader, system, table.get("points", {}), body.name, f"{entry}.points")
+    _read_joints(reader, system, document)
     scalar_items: list[tuple[str, Callable]] = [
         ("constraints", system.add_constraint),
         ("nonholonomic_constraints", system.add_nonholonomic_constraint),
@@ -502,6 +534,43 @@ def _read_items(reader: _Reader, system: System, document: dict) -> None:
         point = reader.point(table["point"], f"{entry}.point")
         with reader.entry(entry):
             system.add_trace(point, name=_optional_name(reader, table, entry))
+
+
+def _read_body_points(reader: _Reader, system: System, table, body: str, entry: str) -> None:
+    """``points = {name = [body coordinates], ...}`` of a body: system points, and named points of the file."""
+    if not isinstance(table, dict):
+        raise reader.error(entry, f"expected a table of named points, got {_kind(table)}")
+    for key, value in table.items():
+        if key in reader.points:
+            raise reader.error(f"{entry}.{key}", f"the point name {key!r} is used twice")
+        local = reader.vector(value, f"{entry}.{key}", (system.dimension,))
+        with reader.entry(f"{entry}.{key}"):
+            point = system.add_point(key, body, local)
+        reader.add_point(key, list(point.position), f"{entry}.{key}")
+
+
+def _read_joints(reader: _Reader, system: System, document: dict) -> None:
+    dimension = system.dimension
+    for entry, table in reader.tables(document, "joints", required=("type", "body_a", "body_b"),
+                                      optional=("name", "at_a", "at_b", "axis", "axis_b", "angle", "rotation")):
+        options: dict[str, Any] = {}
+        for key in ("at_a", "at_b"):
+            if key in table:
+                value = table[key]
+                options[key] = value if isinstance(value, str) else reader.vector(value, f"{entry}.{key}",
+                                                                                  (dimension,))
+        for key in ("axis", "axis_b"):
+            if key in table:
+                options[key] = reader.vector(table[key], f"{entry}.{key}", (dimension,))
+        if "angle" in table:
+            options["angle"] = reader.expression(table["angle"], f"{entry}.angle")
+        if "rotation" in table:
+            options["rotation"] = _rotation(reader, table["rotation"], f"{entry}.rotation")
+        with reader.entry(entry):
+            system.add_joint(reader.string(table["type"], f"{entry}.type"),
+                             reader.string(table["body_a"], f"{entry}.body_a"),
+                             reader.string(table["body_b"], f"{entry}.body_b"),
+                             name=_optional_name(reader, table, entry), **options)
 
 
 def _optional_name(reader: _Reader, table: dict, entry: str) -> str | None:
@@ -663,8 +732,20 @@ def _document(model: ModelFile) -> dict[str, Any]:
             entry["unit"] = model.units[symbol.name]
         parameters[symbol.name] = entry
     document["parameters"] = parameters
+    points = {body: {name: writer.vector(point.local) for name, point in system.points.items() if point.body == body}
+              for body in ("ground", *(body.name for body in system.bodies))}
+    if points["ground"]:
+        document["points"] = points["ground"]
     document["bodies"] = [_body_document(writer, body) for body in system.bodies]
-    for key, items in (("constraints", system.constraints),
+    for entry in document["bodies"]:
+        if points[entry["name"]]:
+            entry["points"] = points[entry["name"]]
+    document["joints"] = [{"name": joint.name, "type": joint.kind, "body_a": joint.body_a, "body_b": joint.body_b,
+                           **{key: writer.expression(value) if key == "angle" else
+                              writer.matrix(value) if key == "rotation" else writer.vector(value)
+                              for key, value in joint.geometry}} for joint in system.joints]
+    joint_rows = {row for joint in system.joints for row in joint.constraint_names}
+    for key, items in (("constraints", [c for c in system.constraints if c.name not in joint_rows]),
                        ("nonholonomic_constraints", system.nonholonomic_constraints),
                        ("potentials", system.potentials)):
         document[key] = [{"name": item.name, "expression": writer.expression(item.expression)} for item in items]

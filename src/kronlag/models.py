@@ -10,6 +10,7 @@ from collections.abc import Callable
 
 import sympy as sp
 
+from .joints import free_body, mechanism
 from .system import PlanarBody, PointMass, RigidBody, System, coordinates
 
 __all__ = [
@@ -18,6 +19,7 @@ __all__ = [
     "closed_chain",
     "double_pendulum",
     "slider_crank",
+    "slider_crank_engine",
     "heavy_top",
     "chaplygin_sleigh",
     "pendulum_cartesian",
@@ -174,6 +176,37 @@ def slider_crank() -> System:
     system.add_constraint(l1 * sin(q1) + l2 * sin(q2), name="pin y")
     system.add_torque("crank", tau, name="drive")
     system.add_drawing_line([(0, 0), (l1 * cos(q1), l1 * sin(q1)), (x, 0)], name="crank and rod")
+    return system
+
+
+def slider_crank_engine() -> System:
+    """Slider-crank engine written as bodies + joints (redundant body coordinates).
+
+    Crank (``m1``, ``I1``, radius ``l1``), connecting rod (``m2``, ``I2``, length
+    ``l2``) and piston (``m3``, ``I3``), each with its own coordinates
+    ``x_<body>, y_<body>, theta_<body>`` (centre of mass and angle); torque ``tau``
+    on the crank, gravity ``g`` along -y.  Named points ``main``, ``crank_pin``
+    (crank), ``big_end``, ``small_end`` (rod), ``wrist`` (piston); joints
+    ``main_bearing`` (ground-crank), ``crank_pin`` (crank-rod), ``wrist_pin``
+    (rod-piston), revolute, and ``cylinder`` (ground-piston, prismatic along x).
+    """
+    l1, l2, m1, m2, m3, I1, I2, I3, g, tau = sp.symbols("l1 l2 m1 m2 m3 I1 I2 I3 g tau")
+    bodies = [free_body("crank", mass=m1, inertia=I1), free_body("rod", mass=m2, inertia=I2),
+              free_body("piston", mass=m3, inertia=I3)]
+    system = mechanism(bodies, parameters=[l1, l2, m1, m2, m3, I1, I2, I3, g, tau], gravity=(0, -g),
+                       name="slider_crank_engine")
+    system.add_point("main", "crank", (-l1 / 2, 0))
+    system.add_point("crank_pin", "crank", (l1 / 2, 0))
+    system.add_point("big_end", "rod", (-l2 / 2, 0))
+    system.add_point("small_end", "rod", (l2 / 2, 0))
+    system.add_point("wrist", "piston", (0, 0))
+    system.add_joint("revolute", "ground", "crank", at_b="main", name="main_bearing")
+    system.add_joint("revolute", "crank", "rod", at_a="crank_pin", at_b="big_end", name="crank_pin")
+    system.add_joint("revolute", "rod", "piston", at_a="small_end", at_b="wrist", name="wrist_pin")
+    system.add_joint("prismatic", "ground", "piston", axis=(1, 0), name="cylinder")
+    system.add_torque("crank", tau, name="drive")
+    system.add_drawing_line([system.point(name).position for name in ("main", "crank_pin", "wrist")],
+                            name="engine")
     return system
 
 
@@ -482,6 +515,7 @@ BUILTIN_MODELS: dict[str, Callable[[], System]] = {
     "quick_return": quick_return,
     "double_pendulum": double_pendulum,
     "slider_crank": slider_crank,
+    "slider_crank_engine": slider_crank_engine,
     "heavy_top": heavy_top,
     "chaplygin_sleigh": chaplygin_sleigh,
     "pendulum_cartesian": pendulum_cartesian,

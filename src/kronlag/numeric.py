@@ -351,6 +351,54 @@ class NumericModel:
             self._libraries[group] = library
         return library
 
+    def evaluate_expressions(self, group: str, matrices: Callable[[], Mapping[str, sp.MatrixBase]], q,
+                             qd=None, t: float = 0.0) -> dict[str, np.ndarray]:
+        """Evaluate further expressions of ``(t, q, qd, parameters)`` at one state.
+
+        ``matrices()`` gives the named SymPy matrices of ``group``; it is called and
+        compiled (Python backend: these are post-processing quantities such as body
+        points and joint reactions) on the first use of ``group`` only.
+
+        Returns
+        -------
+        dict
+            Each matrix by name as a float array of its shape.
+        """
+        key = f"expressions:{group}"
+        library = self._libraries.get(key)
+        if library is None:
+            kernel_name = f"expressions{len(self._libraries)}"  # an identifier, unlike ``group``
+            library = codegen.PythonLibrary([self._source.expression_kernel(kernel_name, matrices())], m=self.m,
+                                            n_parameters=len(self.parameter_names), rank_rtol=self.rank_rtol)
+            self._libraries[key] = library
+        (kernel,) = library.kernels.values()
+        q = self._vector(q, "q")
+        qd = self._vector(qd, "qd") if qd is not None else np.zeros(self.m)
+        flat = library.evaluator(kernel.name, (kernel.size,))(t, q, qd, self.parameter_vector(t))
+        values, start = {}, 0
+        for block in kernel.blocks:
+            values[block.name] = flat[start:start + block.size].reshape(block.shape)
+            start += block.size
+        return values
+
+    def point_state(self, name: str, q, qd=None, qdd=None, t: float = 0.0) -> dict[str, np.ndarray]:
+        """Position, velocity and acceleration of the named body point ``name`` (see
+        :meth:`kronlag.System.add_point`): ``r`` (d,), ``v = J qd``, ``a = J qdd + Jd qd``
+        (zero speeds and accelerations when not given), each of shape (d,)."""
+        from .frames import point_kinematics
+
+        system = self.equations.system
+        values = self.evaluate_expressions(f"point:{name}", lambda: point_kinematics(system, name), q, qd, t)
+        qd = np.zeros(self.m) if qd is None else self._vector(qd, "qd")
+        qdd = np.zeros(self.m) if qdd is None else self._vector(qdd, "qdd")
+        velocity = values["J"] @ qd
+        return {"position": values["position"][:, 0], "velocity": velocity,
+                "acceleration": values["J"] @ qdd + values["Jd_qd"][:, 0]}
+
+    def point_position(self, name: str, q, t: float = 0.0) -> np.ndarray:
+        """World position of the named body point ``name`` at ``q``, shape (d,)."""
+        return self.point_state(name, q, t=t)["position"]
+
     @property
     def c_source(self) -> str:
         """Self-contained C source defining ``kronlag_forward_dynamics`` (C backend only)."""

@@ -307,6 +307,8 @@ class System:
         self.springs, self.dampers, self.potentials, self.forces = [], [], [], []
         self.drawing: list[DrawingLine] = []
         self.traces: list[DrawingLine] = []
+        self.points: dict = {}  # name -> kronlag.frames.BodyPoint
+        self.joints: list = []  # kronlag.joints.Joint
         if gravity is not None:
             vector = _vector(gravity, "gravity", (2, 3))
             self._check_symbols(vector, "gravity", allow_q=False)
@@ -422,6 +424,33 @@ class System:
             if body.name == name:
                 return body
         raise ModelError(f"no body named {name!r}; bodies are {[b.name for b in self.bodies]}")
+
+    def add_point(self, name: str, body: str, local):
+        """Name the point with body coordinates ``local`` (from the centre of mass, in the body
+        frame) of ``body`` (``"ground"``: world coordinates); returns its
+        :class:`kronlag.frames.BodyPoint`, whose ``position`` is the world position ``r(q)``."""
+        from .frames import make_body_point
+
+        _check_name(name, "point")
+        if name in self.points:
+            raise ModelError(f"duplicate point name {name!r}")
+        point = make_body_point(self, name, body, local)
+        self._check_symbols(point.position, f"point {name!r}")
+        self.points[name] = point
+        return point
+
+    def point(self, name: str):
+        """The :class:`kronlag.frames.BodyPoint` called ``name``."""
+        if name not in self.points:
+            raise ModelError(f"no point named {name!r}; points are {list(self.points)}")
+        return self.points[name]
+
+    def add_joint(self, kind: str, body_a: str, body_b: str, **geometry):
+        """Add a joint between ``body_a`` (or ``"ground"``) and ``body_b``: its named constraint
+        rows ``"<name>.x"``, ... ; see :func:`kronlag.joints.add_joint` for kinds and geometry."""
+        from .joints import add_joint
+
+        return add_joint(self, kind, body_a, body_b, **geometry)
 
     def add_constraint(self, expression, *, name: str | None = None) -> None:
         """Add a holonomic constraint ``f_j(q) = 0``."""

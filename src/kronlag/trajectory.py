@@ -11,10 +11,14 @@ with time along the first axis of every array, and exports it as columns.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from os import PathLike
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from .energy import nonconservative_work
+from .reactions import Reaction, joint_reaction, plot_reactions, reaction_columns
 
 if TYPE_CHECKING:
     from .numeric import NumericModel
@@ -103,7 +107,10 @@ class Trajectory:
     (``q1, q2, ...``); their velocities (``q1d, ...``) and accelerations
     (``q1dd, ...``); ``lambda1 .. lambdar``; ``mu1 .. mus``;
     ``kinetic_energy``; ``potential_energy``; ``position_residual1 ..
-    position_residualr``; ``velocity_residual1 .. velocity_residual(r+s)``.
+    position_residualr``; ``velocity_residual1 .. velocity_residual(r+s)``; then, for
+    every joint of the system (:meth:`kronlag.System.add_joint`), its reaction in world
+    components (:meth:`reaction`): ``<joint>.Fx, <joint>.Fy[, <joint>.Fz]`` and
+    ``<joint>.Mz`` (planar) or ``<joint>.Mx, .My, .Mz`` (spatial).
     """
 
     t: np.ndarray
@@ -137,6 +144,19 @@ class Trajectory:
         """``T + Pi``, shape (N,)."""
         return self.kinetic_energy + self.potential_energy
 
+    @cached_property
+    def nonconservative_work(self) -> np.ndarray:
+        """``W(t) = integral qd^T f_Q dt`` from ``t[0]``: the work of applied forces and torques,
+        dampers and generalized forces, shape (N,); see :mod:`kronlag.energy`."""
+        return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd)
+
+    @property
+    def energy_balance(self) -> np.ndarray:
+        """``E(t) - E(t0) - W(t)``, shape (N,): zero up to the integration error, also for driven and
+        damped models (``E = T + Pi``)."""
+        energy = self.total_energy
+        return energy - energy[:1] - self.nonconservative_work
+
     def __len__(self) -> int:
         return len(self.t)
 
@@ -164,7 +184,15 @@ class Trajectory:
             ([f"velocity_residual{j + 1}" for j in range(self.velocity_residual.shape[1])],
              self.velocity_residual),
         ]
-        return {name: values[:, i] for labels, values in blocks for i, name in enumerate(labels)}
+        columns = {name: values[:, i] for labels, values in blocks for i, name in enumerate(labels)}
+        columns.update(reaction_columns(self.model, self.t, self.q, self.lam))
+        return columns
+
+    def reaction(self, name: str, *, frame: str = "world") -> Reaction:
+        """The reaction of joint ``name`` at every output time: the force (N, d) and couple
+        (N, 1 planar or N, 3 spatial) that body A exerts on body B at B's joint point, in
+        world or B's body components; see :mod:`kronlag.reactions`."""
+        return joint_reaction(self.model, name, self.t, self.q, self.lam, frame=frame)
 
     def to_csv(self, path: str | PathLike) -> None:
         """Write the columns to a comma-separated file with a one-line header of column names."""
@@ -196,6 +224,10 @@ class Trajectory:
         from .plotting import plot_trajectory
 
         return plot_trajectory(self, **kwargs)
+
+    def plot_reactions(self, joints=None, **kwargs):
+        """Plot joint reactions over time; see :func:`kronlag.reactions.plot_reactions`."""
+        return plot_reactions(self, joints, **kwargs)
 
     def animate(self, path=None, **kwargs):
         """Animate the mechanism; see :func:`kronlag.animation.animate`."""

@@ -10,7 +10,7 @@ and :func:`inverse_dynamics_along` use the numeric layer
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -21,6 +21,7 @@ from .derivation import derive
 from .equations import Equations
 from .expressions import parse_expression
 from .modelfile import ModelFile
+from .reactions import reaction_columns
 from .system import ModelError, t
 
 if TYPE_CHECKING:
@@ -175,10 +176,13 @@ class SimulationSummary:
     position_drift, velocity_drift : float
         ``max |Phi(q)|`` and ``max |[Phi_q qd; A qd + b]|`` over the run.
     energy_drift : float
-        ``max |E(t) - E(0)|`` of the total energy ``T + Pi`` (a conservation
-        check only for models without driving or dissipative forces).
+        ``max |E(t) - E(0) - W(t)|``: the total energy ``E = T + Pi`` against the work
+        ``W`` of the non-conservative forces (:attr:`Trajectory.energy_balance`), zero up to
+        the integration error for driven and damped models too.
     relative_energy_drift : float
-        ``energy_drift`` over ``max(|E|)`` (0 if the energy is 0 throughout).
+        ``energy_drift`` over ``max(|E|, |W|)`` (0 if both are 0 throughout).
+    work : float
+        ``W`` at the last time: the work of applied forces, torques and dampers.
     wall_time : float
         Seconds.
     """
@@ -194,6 +198,7 @@ class SimulationSummary:
     energy_drift: float
     relative_energy_drift: float
     wall_time: float
+    work: float = 0.0
 
     def report(self) -> str:
         """A few lines of text for people."""
@@ -202,7 +207,8 @@ class SimulationSummary:
             f"status: {status}",
             f"method {self.method}: {self.steps} steps, {self.points} output points, t = 0 .. {self.t_final:g}",
             f"max constraint drift: position {self.position_drift:.3g}, velocity {self.velocity_drift:.3g}",
-            f"energy drift: {self.energy_drift:.3g} (relative {self.relative_energy_drift:.3g})",
+            f"energy drift: {self.energy_drift:.3g} (relative {self.relative_energy_drift:.3g}; "
+            f"E(t) - E(0) - W(t) with the work of non-conservative forces W = {self.work:.6g})",
             f"wall time: {self.wall_time:.3g} s",
         ])
 
@@ -213,15 +219,17 @@ def _largest(values: np.ndarray) -> float:
 
 def summarize(trajectory: Trajectory) -> SimulationSummary:
     """Steps, constraint and energy drift and wall time of a trajectory."""
-    energy = trajectory.kinetic_energy + trajectory.potential_energy
-    drift = _largest(energy - energy[0]) if energy.size else 0.0
-    scale = _largest(energy)
+    energy = trajectory.total_energy
+    work = trajectory.nonconservative_work if energy.size else energy
+    drift = _largest(trajectory.energy_balance) if energy.size else 0.0
+    scale = max(_largest(energy), _largest(work))
     return SimulationSummary(
         success=trajectory.success, message=trajectory.message, method=trajectory.method,
         steps=trajectory.steps, points=len(trajectory.t),
         t_final=float(trajectory.t[-1]) if len(trajectory.t) else 0.0,
         position_drift=_largest(trajectory.position_residual), velocity_drift=_largest(trajectory.velocity_residual),
-        energy_drift=drift, relative_energy_drift=drift / scale if scale else 0.0, wall_time=trajectory.wall_time)
+        energy_drift=drift, relative_energy_drift=drift / scale if scale else 0.0, wall_time=trajectory.wall_time,
+        work=float(work[-1]) if work.size else 0.0)
 
 
 # -- inverse dynamics -----------------------------------------------------------------
@@ -251,6 +259,9 @@ class InverseDynamicsRun:
         Rows up to the first failure (if any).
     message : str
         Empty on success; otherwise why the run stopped.
+    reactions : dict of str to (N,) arrays
+        The joints' reactions in world components, named as in
+        :func:`kronlag.reactions.reaction_columns` (``main_bearing.Fx``, ...).
     """
 
     actuated: tuple[str, ...]
@@ -263,6 +274,7 @@ class InverseDynamicsRun:
     lam: np.ndarray
     mu: np.ndarray
     message: str = ""
+    reactions: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def success(self) -> bool:
@@ -270,14 +282,16 @@ class InverseDynamicsRun:
         return not self.message
 
     def columns(self) -> dict[str, np.ndarray]:
-        """``t``, coordinates, speeds, accelerations, ``force_<q>``, ``lambda<j>``, ``mu<k>``."""
+        """``t``, coordinates, speeds, accelerations, ``force_<q>``, ``lambda<j>``, ``mu<k>``, then
+        the joints' reactions (``<joint>.Fx``, ...)."""
         blocks = [(["t"], self.t[:, None]), (list(self.coordinate_names), self.q),
                   ([f"{n}d" for n in self.coordinate_names], self.qd),
                   ([f"{n}dd" for n in self.coordinate_names], self.qdd),
                   ([f"force_{n}" for n in self.actuated], self.forces),
                   ([f"lambda{j + 1}" for j in range(self.lam.shape[1])], self.lam),
                   ([f"mu{k + 1}" for k in range(self.mu.shape[1])], self.mu)]
-        return {label: values[:, i] for labels, values in blocks for i, label in enumerate(labels)}
+        columns = {label: values[:, i] for labels, values in blocks for i, label in enumerate(labels)}
+        return columns | self.reactions
 
     def save(self, path: str | Path) -> None:
         """Write the columns to ``.csv`` or ``.npz`` (by the suffix)."""
@@ -361,4 +375,5 @@ def inverse_dynamics_along(model: ModelFile, drives: Mapping[str, sp.Expr], time
     widths = ((), (numeric.m,), (numeric.m,), (numeric.m,), (len(drives),), (numeric.r,), (numeric.s,))
     arrays = [np.array([row[k] for row in rows], dtype=float).reshape(len(rows), *width)
               for k, width in enumerate(widths)]
-    return InverseDynamicsRun(tuple(drives), names, *arrays, message=message)
+    reactions = reaction_columns(numeric, arrays[0], arrays[1], arrays[5])
+    return InverseDynamicsRun(tuple(drives), names, *arrays, message=message, reactions=reactions)

@@ -1,0 +1,52 @@
+"""Energy balance along a solution of Eq. 23.
+
+With ``T = 1/2 qd^T M qd`` and the potential ``Pi(q)`` (gravity, springs,
+potentials), Eq. 23 gives ``d(T + Pi)/dt = qd^T f_Q - qd^T (Phi_q^T lambda + A^T mu)``;
+the constraint forces do no work on motions that satisfy ``Phi_q qd = 0`` and
+``A qd + b = 0`` with ``b = 0`` (scleronomic constraints).  So::
+
+    E(t) - E(0) = W(t),   W(t) = integral_0^t qd^T f_Q(q, qd, t) dt
+
+where ``W`` is the work of the non-conservative forces: applied forces and
+torques, dampers and generalized forces.  ``E - E(0) - W`` is the true energy
+drift of an integration, for driven and damped models as well as conservative
+ones.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["nonconservative_work"]
+
+
+def _power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:
+    return float(qd @ model.f_Q(q, qd, t))
+
+
+def nonconservative_work(model, t, q, qd, qdd) -> np.ndarray:
+    """``W(t_k) = integral_{t_0}^{t_k} qd^T f_Q dt`` along a sampled motion, shape (N,).
+
+    The power ``P = qd^T f_Q`` is integrated between samples by the cubic
+    Hermite rule ``h/2 (P0 + P1) + h^2/12 (P0' - P1')`` (error O(h^5) per
+    interval), with ``P' = dP/dt`` by a central difference along the motion
+    ``(q + e qd, qd + e qdd, t + e)``.
+
+    Parameters
+    ----------
+    model : NumericModel
+    t : (N,)
+    q, qd, qdd : (N, m)
+    """
+    t = np.asarray(t, dtype=float)
+    if len(t) == 0:
+        return np.zeros(0)
+    power = np.array([_power(model, *state) for state in zip(t, q, qd)])
+    scale = np.max(np.diff(t)) if len(t) > 1 else 1.0
+    step = 1e-6 * scale
+    rate = np.array([(_power(model, time + step, x + step * v, v + step * a)
+                      - _power(model, time - step, x - step * v, v - step * a)) / (2 * step)
+                     for time, x, v, a in zip(t, q, qd, qdd)])
+    h = np.diff(t)
+    increments = h / 2 * (power[:-1] + power[1:]) + h ** 2 / 12 * (rate[:-1] - rate[1:])
+    return np.concatenate([[0.0], np.cumsum(increments)])

@@ -1,0 +1,156 @@
+"""Named joint reactions: the multipliers of a joint turned into a force and a couple.
+
+For a joint J between bodies A and B (see :mod:`kronlag.joints`) with
+multipliers ``lambda_J`` (its rows of ``lambda`` in Eq. 23,
+``M qdd + C qd + Phi_q^T lambda + ... = f_Q``)::
+
+    [F; T] = W(q) lambda_J
+
+is the wrench that body A exerts on body B, reduced at B's joint point
+``P_B``: the force ``F`` acts at ``P_B`` and ``T`` is the couple (the torque
+about ``P_B``).  Body A feels ``-F`` at ``P_B`` and ``-T``.  Components are
+in the world frame, or in B's body frame (``R_B^T F``, ``R_B^T T``) with
+``frame="body"``.  Planar systems have ``F = (Fx, Fy)`` and ``T = (Mz,)``,
+spatial ones ``F = (Fx, Fy, Fz)`` and ``T = (Mx, My, Mz)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from os import PathLike
+
+import numpy as np
+import sympy as sp
+
+from .joints import Joint
+
+__all__ = ["Reaction", "joint_reaction", "reaction_columns", "plot_reactions"]
+
+_FRAMES = ("world", "body")
+
+
+@dataclass(frozen=True, eq=False)
+class Reaction:
+    """The reaction of joint ``name``: the wrench body A exerts on body B.
+
+    Attributes
+    ----------
+    name : str
+    frame : {"world", "body"}
+        Components in the world frame or in B's body frame.
+    force : (N, d)
+        ``F``, acting at ``point``.
+    torque : (N, 1) planar or (N, 3) spatial
+        ``T``, the couple (torque about ``point``).
+    point : (N, d)
+        ``P_B``, B's joint point, world coordinates.
+    """
+
+    name: str
+    frame: str
+    force: np.ndarray
+    torque: np.ndarray
+    point: np.ndarray
+
+
+def _joint(system, name: str) -> Joint:
+    for joint in system.joints:
+        if joint.name == name:
+            return joint
+    known = ", ".join(joint.name for joint in system.joints) or "the system has none"
+    raise KeyError(f"no joint named {name!r} (joints: {known})")
+
+
+def _expressions(joint: Joint) -> dict[str, sp.MatrixBase]:
+    return {"W": joint.wrench, "P": joint.point, "R": joint.rotation_b}
+
+
+def joint_reaction(model, name: str, t, q, lam, *, frame: str = "world") -> Reaction:
+    """The reaction of joint ``name`` along a motion (time along the first axis).
+
+    Parameters
+    ----------
+    model : NumericModel
+    name : str
+        A joint of ``model.equations.system``.
+    t : (N,)
+    q : (N, m)
+    lam : (N, r)
+        The multipliers of Eq. 23 at those states.
+    frame : {"world", "body"}
+
+    Returns
+    -------
+    Reaction
+    """
+    if frame not in _FRAMES:
+        raise ValueError(f"frame must be 'world' or 'body', got {frame!r}")
+    system = model.equations.system
+    joint = _joint(system, name)
+    index = {constraint.name: j for j, constraint in enumerate(system.constraints)}
+    rows = [index[row] for row in joint.constraint_names]
+    t, q, lam = np.atleast_1d(t), np.atleast_2d(q), np.atleast_2d(lam)
+    d = joint.dimension
+    forces, torques, points = [], [], []
+    for time, state, multipliers in zip(t, q, lam):
+        values = model.evaluate_expressions(f"joint:{name}", lambda: _expressions(joint), state, t=float(time))
+        wrench = values["W"] @ multipliers[rows]
+        force, torque = wrench[:d], wrench[d:]
+        if frame == "body":
+            rotation = values["R"]
+            force = rotation.T @ force
+            torque = rotation.T @ torque if d == 3 else torque
+        forces.append(force)
+        torques.append(torque)
+        points.append(values["P"][:, 0])
+    return Reaction(name, frame, np.array(forces).reshape(len(t), d),
+                    np.array(torques).reshape(len(t), 1 if d == 2 else 3), np.array(points).reshape(len(t), d))
+
+
+def reaction_columns(model, t, q, lam) -> dict[str, np.ndarray]:
+    """Export columns of every joint's world-frame reaction: ``<joint>.Fx, .Fy[, .Fz]``,
+    ``<joint>.Mz`` (planar) or ``.Mx, .My, .Mz`` (spatial), each of shape (N,)."""
+    columns: dict[str, np.ndarray] = {}
+    for joint in model.equations.system.joints:
+        reaction = joint_reaction(model, joint.name, t, q, lam)
+        force_names = "xyz"[:joint.dimension]
+        torque_names = "z" if joint.dimension == 2 else "xyz"
+        columns.update({f"{joint.name}.F{axis}": reaction.force[:, i] for i, axis in enumerate(force_names)})
+        columns.update({f"{joint.name}.M{axis}": reaction.torque[:, i] for i, axis in enumerate(torque_names)})
+    return columns
+
+
+def plot_reactions(trajectory, joints: Sequence[str] | None = None, *, frame: str = "world",
+                   path: str | PathLike | None = None):
+    """Plot the reactions of ``joints`` (default: every joint) over time, one row per joint:
+    the force components ``F`` and ``|F|`` on the left, the couple ``T`` on the right.
+
+    Returns the :class:`matplotlib.figure.Figure` (standalone, no GUI backend needed);
+    with ``path`` it is also saved there.
+    """
+    from matplotlib.figure import Figure
+
+    system = trajectory.model.equations.system
+    names = [joint.name for joint in system.joints] if joints is None else list(joints)
+    if not names:
+        raise ValueError(f"{system.name} has no joints to plot the reactions of")
+    figure = Figure(figsize=(12.0, 2.8 * len(names)), layout="constrained")
+    axes = figure.subplots(len(names), 2, squeeze=False, sharex=True)
+    for (forces, couples), name in zip(axes, names):
+        reaction = joint_reaction(trajectory.model, name, trajectory.t, trajectory.q, trajectory.lam, frame=frame)
+        for i, axis in enumerate("xyz"[:reaction.force.shape[1]]):
+            forces.plot(trajectory.t, reaction.force[:, i], label=f"$F_{axis}$")
+        forces.plot(trajectory.t, np.linalg.norm(reaction.force, axis=1), "k--", label="$|F|$")
+        for i, axis in enumerate("z" if reaction.torque.shape[1] == 1 else "xyz"):
+            couples.plot(trajectory.t, reaction.torque[:, i], label=f"$M_{axis}$")
+        forces.set_title(f"{name}: force on {_joint(system, name).body_b} ({frame} frame)")
+        couples.set_title(f"{name}: couple")
+        for panel in (forces, couples):
+            panel.legend(loc="upper right", fontsize="small")
+            panel.grid(True, alpha=0.3)
+    for panel in axes[-1]:
+        panel.set_xlabel("t")
+    if path is not None:
+        figure.savefig(path, dpi=100)
+    return figure
