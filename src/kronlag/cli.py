@@ -257,7 +257,7 @@ def _default_points(t_end: float) -> int:
 
 def _failure_hint(message: str) -> str:
     hints = [hint for pattern, hint in _FAILURE_HINTS.items() if re.search(pattern, message, re.IGNORECASE)]
-    return message.rstrip(".") + "".join(f" ({hint})" for hint in hints)
+    return "; ".join([message.rstrip("."), *hints])
 
 
 def _simulate(arguments: argparse.Namespace) -> None:
@@ -271,7 +271,7 @@ def _simulate(arguments: argparse.Namespace) -> None:
     bar.close()
     print(summarize(trajectory).report())
     reached = trajectory.t[-1] if len(trajectory.t) else 0.0
-    failure = "" if trajectory.success else (f"simulation failed ({_failure_hint(trajectory.message)}); "
+    failure = "" if trajectory.success else (f"simulation failed: {_failure_hint(trajectory.message)}; "
                                              f"the trajectory reaches t = {reached:g}")
     _finish_run(trajectory, outputs, arguments, model, failure=failure, save=trajectory.to_npz,
                 rescue_name=f"{model.system.name}-trajectory.npz")
