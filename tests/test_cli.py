@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -403,3 +404,22 @@ def test_units_come_from_the_model_file(name, units):
 
 def test_no_units_are_guessed(tmp_path):
     assert model_units(resolve_model(str(write_model(tmp_path, POINT_MASS)))) == {}
+
+
+def test_too_fast_an_animation_gets_a_slower_speed_suggested(capsys, tmp_path):
+    movie = tmp_path / "run.gif"
+    # The four-bar's crank reaches about 20 rad/s near t = 0.6: 4 x 20 / 25 = 3.2 rad between frames.
+    code, _, err = run(capsys, "simulate", "four_bar", "--t-end", "1", "--animate", movie, "--speed", "4")
+    assert code == 0 and movie.exists()
+    assert "between frames" in err
+    suggested = float(re.search(r"--speed (\S+) \(or a higher --fps\)", err)[1])
+    assert 0 < suggested < 4
+    code, _, err = run(capsys, "simulate", "four_bar", "--t-end", "1", "--animate", movie, "--speed", suggested)
+    assert code == 0 and "between frames" not in err
+
+
+def test_singular_configuration_is_explained(capsys, tmp_path):
+    text = example_path("heavy_top").read_text().replace("theta = 0.5", "theta = 0.0")  # gimbal lock
+    code, _, err = run(capsys, "simulate", write_model(tmp_path, text, "top.toml"), "--t-end", "0.1")
+    assert code == 1
+    assert "singular configuration" in err and "saved in" in err

@@ -47,6 +47,11 @@ _FAILURE_HINTS = {
 }
 
 
+#: Largest turn of an angle coordinate between animation frames that the eye follows (radians); the CLI
+#: suggests a slower --speed above it (a crank turning half a revolution per frame seems to stand still).
+_SMOOTH_TURN = np.pi / 3
+
+
 class IncompleteRun(Exception):
     """A run did not finish or an output could not be written; the message says what was saved."""
 
@@ -93,6 +98,14 @@ def _plot_trajectory(trajectory, path: Path, arguments: argparse.Namespace, mode
 
 def _animate(trajectory, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
     trajectory.animate(path, fps=arguments.fps, speed=arguments.speed, duration=arguments.duration)
+    angles = [k for k, name in enumerate(trajectory.coordinate_names) if model_units(model).get(name) == "rad"]
+    span = trajectory.t[-1] - trajectory.t[0]
+    speed = span / arguments.duration if arguments.duration else arguments.speed or 1.0
+    turn = float(np.max(np.abs(trajectory.qd[:, angles]), initial=0.0)) * speed / arguments.fps
+    if turn > _SMOOTH_TURN:
+        slower = float(f"{speed * _SMOOTH_TURN / turn:.1g}")
+        print(f"note: an angle turns by up to {np.degrees(turn):.0f} degrees between frames of {path}, too fast to "
+              f"follow; --speed {slower:g} (or a higher --fps) shows the motion smoothly", file=sys.stderr)
 
 
 def _plot_inverse(run, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
