@@ -1,5 +1,5 @@
 """The command line, end to end through ``kronlag.cli.main`` (and once as a process):
-outputs, files written, and exit codes 0 (ok), 2 (bad input), 1 (numerical failure)."""
+outputs, files written, and exit codes 0 (ok), 2 (bad input), 1 (the run did not complete: numerical failure or an output not written)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ import sys
 
 import numpy as np
 import pytest
-
 from PIL import Image, ImageSequence
 
 from kronlag import animation, cli
@@ -217,6 +216,7 @@ def test_parser_has_a_command_per_task():
     assert parser.prog == "kronlag"
 
 
+@pytest.mark.slow
 def test_runs_as_a_program(tmp_path):
     good = subprocess.run([sys.executable, "-m", "kronlag.cli", "check", "slider_crank"], capture_output=True,
                           text=True, timeout=1800)
@@ -418,6 +418,7 @@ def test_too_fast_an_animation_gets_a_slower_speed_suggested(capsys, tmp_path):
     assert code == 0 and "between frames" not in err
 
 
+@pytest.mark.slow
 def test_singular_configuration_is_explained(capsys, tmp_path):
     text = example_path("heavy_top").read_text().replace("theta = 0.5", "theta = 0.0")  # gimbal lock
     code, _, err = run(capsys, "simulate", write_model(tmp_path, text, "top.toml"), "--t-end", "0.1")

@@ -228,8 +228,8 @@ class _Picture:
         self.legend = [(name, _COLORS[k % len(_COLORS)]) for k, name in enumerate([*lines, *traces])]
         legend_height = 22 if self.legend else 0
         view_height = int(np.ceil(span[1] * self.scale))
-        self.size = (width + width % 2, self._TITLE_HEIGHT + view_height + legend_height)
-        self.size = (self.size[0], self.size[1] + self.size[1] % 2)  # even sizes, as video encoders want
+        height = self._TITLE_HEIGHT + view_height + legend_height
+        self.size = (width + width % 2, height + height % 2)  # even sizes, as video encoders want
         self.lines = {name: self._pixels(points) for name, points in lines.items()}
         self.traces = {name: self._pixels(path) for name, path in traces.items()}
         self.fixed = self._pixels(fixed)

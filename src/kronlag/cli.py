@@ -29,8 +29,8 @@ from .derivation import derive
 from .export import FORMATS, LANGUAGES, export_code, format_equations
 from .modelfile import ModelFile, example_names, example_path, load_model, resolve_model
 from .models import BUILTIN_MODELS
-from .system import ModelError
 from .plotting import plot_inverse_dynamics
+from .system import ModelError
 from .workflows import check_model, inverse_dynamics_along, model_units, parse_drive, simulate_model, summarize
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT = 0, 1, 2
