@@ -1,5 +1,6 @@
 """The command line, end to end through ``kronlag.cli.main`` (and once as a process):
-outputs, files written, and exit codes 0 (ok), 2 (bad input), 1 (the run did not complete: numerical failure or an output not written)."""
+outputs, files written, and exit codes 0 (ok), 2 (bad input, before any work), 1 (the run did not
+complete: a numerical failure or an output that could not be written)."""
 
 from __future__ import annotations
 

@@ -92,6 +92,10 @@ def _save_trajectory(trajectory, path: Path, arguments: argparse.Namespace, mode
      ".npz": lambda: trajectory.to_npz(path)}[path.suffix]()
 
 
+def _save_inverse(run, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    run.save(path)
+
+
 def _plot_trajectory(trajectory, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
     trajectory.plot(path=path, units=model_units(model))
 
@@ -116,7 +120,7 @@ _PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg")
 _SIMULATION_OUTPUTS = (_OutputKind("--output", (".csv", ".npz", ".parquet"), _check_parquet, _save_trajectory),
                        _OutputKind("--plot", _PLOT_SUFFIXES, _no_check, _plot_trajectory),
                        _OutputKind("--animate", SUPPORTED_FORMATS, _check_animation, _animate))
-_INVERSE_OUTPUTS = (_OutputKind("--output", (".csv", ".npz"), _no_check, lambda run, path, arguments, model: run.save(path)),
+_INVERSE_OUTPUTS = (_OutputKind("--output", (".csv", ".npz"), _no_check, _save_inverse),
                     _OutputKind("--plot", _PLOT_SUFFIXES, _no_check, _plot_inverse))
 
 
@@ -130,7 +134,7 @@ def _requested_outputs(kinds: Sequence[_OutputKind], arguments: argparse.Namespa
         if value is None:
             continue
         path = Path(value)
-        if path.suffix.lower() not in kind.suffixes:
+        if path.suffix not in kind.suffixes:
             raise ModelError(f"{kind.option} {value}: the file name must end in {', '.join(kind.suffixes)}")
         _check_writable(path, kind.option)
         kind.check(path, arguments, model)
@@ -152,17 +156,19 @@ def _check_writable(path: Path, option: str) -> None:
 
 
 def _write_outputs(result, outputs: list[tuple[_OutputKind, Path]], arguments: argparse.Namespace,
-                   model: ModelFile) -> list[str]:
-    """Write every output; one failure does not stop the others.  Returns the failures, one line each."""
-    failures = []
+                   model: ModelFile) -> tuple[list[tuple[_OutputKind, Path]], list[str]]:
+    """Write every output; one failure does not stop the others.
+    Returns the outputs written and the failures, one line each."""
+    written, failures = [], []
     for kind, path in outputs:
         try:
             kind.write(result, path, arguments, model)
         except Exception as error:  # noqa: BLE001 - reported, and the other outputs are still written
             failures.append(f"{kind.option} {path}: {type(error).__name__}: {error}")
         else:
+            written.append((kind, path))
             print(f"wrote {path}")
-    return failures
+    return written, failures
 
 
 def _rescue(save: Callable[[Path], None], name: str) -> Path:
@@ -181,11 +187,10 @@ def _finish_run(result, outputs: list[tuple[_OutputKind, Path]], arguments: argp
                 model: ModelFile, *, failure: str, save: Callable[[Path], None], rescue_name: str) -> None:
     """Write the outputs; if the run failed (``failure`` not empty) or an output could not be written,
     make sure the result is saved somewhere and raise :class:`IncompleteRun` saying where."""
-    failures = _write_outputs(result, outputs, arguments, model)
+    written, failures = _write_outputs(result, outputs, arguments, model)
     if not failure and not failures:
         return
-    saved = [path for kind, path in outputs if kind.option == "--output" and not any(
-        line.startswith(f"--output {path}:") for line in failures)]
+    saved = [path for kind, path in written if kind.option == "--output"]
     where = saved[0] if saved else _rescue(save, rescue_name)
     problems = ([failure] if failure else []) + [f"could not write {line}" for line in failures]
     raise IncompleteRun("; ".join(problems) + f"; the results are saved in {where}")
