@@ -76,9 +76,10 @@ def test_gif_delays_keep_to_simulated_time(half_turn, tmp_path, fps):
     ({"fps": 10, "speed": 0.3}, np.arange(17) * 0.03),  # the last frame at or before the end
 ])
 def test_frame_times_follow_fps_and_speed(options, times):
-    speed, duration = options.get("speed"), options.get("duration")
-    np.testing.assert_allclose(animation._frame_times(0.0, 0.5, fps=options["fps"], speed=speed,
-                                                      duration=duration), times, atol=1e-12)
+    speed = animation.playing_speed(0.5, fps=options["fps"], speed=options.get("speed"),
+                                     duration=options.get("duration"))
+    np.testing.assert_allclose(animation._frame_times(0.0, 0.5, fps=options["fps"], speed=speed), times,
+                               atol=1e-12)
 
 
 def test_speed_and_duration_together_are_refused(half_turn, tmp_path):

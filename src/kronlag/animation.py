@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from .system import System
     from .trajectory import Trajectory
 
-__all__ = ["animate", "render_frame", "check_animation_target", "SUPPORTED_FORMATS"]
+__all__ = ["animate", "render_frame", "check_animation_target", "playing_speed", "SUPPORTED_FORMATS"]
 
 #: File extensions :func:`animate` writes.
 SUPPORTED_FORMATS = (".gif", ".mp4", ".html", ".htm")
@@ -148,22 +148,28 @@ def _resample(traj: Trajectory, times: np.ndarray) -> np.ndarray:
 # -- timing -------------------------------------------------------------------------
 
 
-def _frame_times(t0: float, t1: float, *, fps: float, speed: float | None, duration: float | None) -> np.ndarray:
-    """Simulated times of the frames, ``t0 + k * speed / fps`` up to ``t1``.
+def playing_speed(span: float, *, fps: float, speed: float | None, duration: float | None) -> float:
+    """Simulated seconds per second of playing time: ``speed``, or ``span / duration``, or 1 (real time).
 
-    ``duration`` (playing time in seconds) sets ``speed = (t1 - t0) / duration``;
-    the default speed is 1 (real time).
+    Raises
+    ------
+    ValueError
+        A non-positive ``fps``, ``speed`` or ``duration``, or both of the latter.
     """
     if duration is not None and speed is not None:
         raise ValueError("give the playing speed or the duration of an animation, not both")
     for name, value in (("fps", fps), ("speed", speed), ("duration", duration)):
         if value is not None and not (value > 0 and np.isfinite(value)):
             raise ValueError(f"{name} must be positive, got {value}")
-    span = t1 - t0
-    if duration is not None:
-        speed = span / duration
-    interval = (speed or 1.0) / fps
-    count = int(np.floor(span / interval * (1 + 1e-12))) + 1 if span > 0 else 1
+    if duration is not None and span > 0:
+        return span / duration
+    return speed or 1.0
+
+
+def _frame_times(t0: float, t1: float, *, fps: float, speed: float) -> np.ndarray:
+    """Simulated times of the frames, ``t0 + k * speed / fps`` up to ``t1``."""
+    interval = speed / fps
+    count = int(np.floor((t1 - t0) / interval * (1 + 1e-12))) + 1 if t1 > t0 else 1
     return t0 + interval * np.arange(count)
 
 
@@ -503,11 +509,12 @@ def animate(traj: Trajectory, path: str | PathLike | None = None, *, fps: float 
     """
     target = None if path is None else Path(path)
     suffix = ".html" if target is None else check_animation_target(target, fps=fps)
-    times = _frame_times(float(traj.t[0]), float(traj.t[-1]), fps=fps, speed=speed, duration=duration)
-    interval = times[1] - times[0] if len(times) > 1 else 1.0 / fps
+    t0, t1 = float(traj.t[0]), float(traj.t[-1])
+    speed = playing_speed(t1 - t0, fps=fps, speed=speed, duration=duration)
+    times = _frame_times(t0, t1, fps=fps, speed=speed)
     picture = _Picture(_evaluate_drawing(traj, times, parameters), width=width, trace=trace)
     if suffix in (".html", ".htm"):
-        page = picture.html(fps=fps, speed=interval * fps)
+        page = picture.html(fps=fps, speed=speed)
         if target is None:
             return page
         target.write_text(page, encoding="utf-8")

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .animation import SUPPORTED_FORMATS, check_animation_target
+from .animation import SUPPORTED_FORMATS, check_animation_target, playing_speed
 from .derivation import derive
 from .export import FORMATS, LANGUAGES, export_code, format_equations
 from .modelfile import ModelFile, example_names, example_path, load_model, resolve_model
@@ -103,8 +103,8 @@ def _plot_trajectory(trajectory, path: Path, arguments: argparse.Namespace, mode
 def _animate(trajectory, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
     trajectory.animate(path, fps=arguments.fps, speed=arguments.speed, duration=arguments.duration)
     angles = [k for k, name in enumerate(trajectory.coordinate_names) if model_units(model).get(name) == "rad"]
-    span = trajectory.t[-1] - trajectory.t[0]
-    speed = span / arguments.duration if arguments.duration else arguments.speed or 1.0
+    speed = playing_speed(trajectory.t[-1] - trajectory.t[0], fps=arguments.fps, speed=arguments.speed,
+                          duration=arguments.duration)
     turn = float(np.max(np.abs(trajectory.qd[:, angles]), initial=0.0)) * speed / arguments.fps
     if turn > _SMOOTH_TURN:
         slower = float(f"{speed * _SMOOTH_TURN / turn:.1g}")
