@@ -22,6 +22,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.skipif(CHROMIUM is None, reason="Chr
 CRANK_SPEED = np.pi  # one turn in 2 s
 LINK_COLOR = np.array([31, 119, 180])  # the colour of the first drawing line
 FPS, WIDTH = 25, 400
+#: Headless Chromium sometimes never takes its screenshot (seen with very short virtual-time budgets):
+#: a run that lasts HANG_GUARD seconds (about 50 times a normal run on a loaded machine) is started again.
+HANG_GUARD, HANG_RETRIES = 120, 1
 
 
 def screenshot(page, size: tuple[int, int], milliseconds: int, tmp_path) -> np.ndarray:
@@ -32,7 +35,13 @@ def screenshot(page, size: tuple[int, int], milliseconds: int, tmp_path) -> np.n
                "--disable-background-networking", "--disable-component-update", "--disable-sync",
                "--force-device-scale-factor=1", f"--user-data-dir={profile}", f"--screenshot={shot}",
                f"--window-size={size[0]},{size[1]}", f"--virtual-time-budget={milliseconds}", page.as_uri()]
-    subprocess.run(command, check=True, capture_output=True, timeout=600)
+    for attempt in range(HANG_RETRIES + 1):
+        try:
+            subprocess.run(command, check=True, capture_output=True, timeout=HANG_GUARD)
+            break
+        except subprocess.TimeoutExpired:
+            if attempt == HANG_RETRIES:
+                raise
     return np.asarray(Image.open(shot).convert("RGB")).astype(int)[:size[1], :size[0]]
 
 
@@ -49,8 +58,13 @@ def test_html_animation_plays_in_chromium(tmp_path):
     picture = _Picture(_evaluate_drawing(trajectory, frame_times, None), width=WIDTH, trace=True)
     pins = picture._pixels(four_bar_joints(CRANK_SPEED * frame_times)[0])  # crank pin B, closed form
 
-    start = screenshot(page, picture.size, 10, tmp_path)
-    assert link_pixels_near(start, pins[0]) > 5  # the first frame is drawn on load
+    def shown_frame(image: np.ndarray) -> int:
+        """The frame whose crank pin the image shows most clearly."""
+        return max(range(len(pins)), key=lambda k: link_pixels_near(image, pins[k]))
+
+    start = screenshot(page, picture.size, 100, tmp_path)
+    assert link_pixels_near(start, pins[shown_frame(start)]) > 5
+    assert shown_frame(start) <= 5  # the animation starts when the page is loaded
 
     later = screenshot(page, picture.size, 1000, tmp_path)
     linkage = np.linalg.norm(later - LINK_COLOR, axis=-1) < 60
@@ -58,6 +72,5 @@ def test_html_animation_plays_in_chromium(tmp_path):
     rows, columns = np.nonzero(linkage)
     assert rows.min() >= picture._TITLE_HEIGHT and columns.max() < picture.size[0]  # ... inside its view
     assert np.abs(later - start).sum(axis=-1).astype(bool).sum() > 500  # ... and has moved
-    shown = max(range(len(pins)), key=lambda k: link_pixels_near(later, pins[k]))
-    assert link_pixels_near(later, pins[shown]) > 5
-    assert 10 <= shown <= 40  # mid-motion: the crank pin is at a frame well after the start
+    assert link_pixels_near(later, pins[shown_frame(later)]) > 5
+    assert 10 <= shown_frame(later) <= 40  # mid-motion: the crank pin is at a frame well after the start

@@ -393,7 +393,8 @@ function tick() {
   setTimeout(tick, (k + 1 - elapsed) * 1000 / D.fps);
 }
 canvas.addEventListener("click", () => {
-  if (pausedAt === null) { pausedAt = performance.now(); } else { origin += performance.now() - pausedAt; pausedAt = null; tick(); }
+  if (pausedAt === null) { pausedAt = performance.now(); return; }
+  origin += performance.now() - pausedAt; pausedAt = null; tick();
 });
 tick();
 """.strip()

@@ -389,7 +389,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_argument("--t-end", type=_positive, help="final time (default: the model's [simulation] t_end)")
     _add_grid_options(sub, "101")
     sub.add_argument("--output", metavar="FILE", help="save the results (.csv or .npz)")
-    sub.add_argument("--plot", metavar="FILE", help="save a figure of the forces and multipliers (.png, .pdf, .svg, .jpg)")
+    sub.add_argument("--plot", metavar="FILE",
+                     help="save a figure of the forces and multipliers (.png, .pdf, .svg, .jpg)")
     return parser
 
 
