@@ -1,19 +1,25 @@
 """The command line, end to end through ``kronlag.cli.main`` (and once as a process):
-outputs, files written, and exit codes 0 (ok), 2 (bad input), 1 (numerical failure)."""
+outputs, files written, and exit codes 0 (ok), 2 (bad input, before any work), 1 (the run did not
+complete: a numerical failure or an output that could not be written)."""
 
 from __future__ import annotations
 
 import io
 import json
+import re
 import shutil
 import subprocess
 import sys
 
 import numpy as np
 import pytest
+from PIL import Image, ImageSequence
 
+from kronlag import animation, cli
 from kronlag.cli import ProgressBar, build_parser, main
-from kronlag.modelfile import example_names, example_path
+from kronlag.modelfile import example_names, example_path, resolve_model
+from kronlag.trajectory import Trajectory
+from kronlag.workflows import model_units
 
 COMMANDS = ["models", "derive", "export", "check", "simulate", "inverse"]
 
@@ -211,14 +217,15 @@ def test_parser_has_a_command_per_task():
     assert parser.prog == "kronlag"
 
 
+@pytest.mark.slow
 def test_runs_as_a_program(tmp_path):
     good = subprocess.run([sys.executable, "-m", "kronlag.cli", "check", "slider_crank"], capture_output=True,
-                          text=True, timeout=120)
+                          text=True, timeout=1800)
     assert good.returncode == 0, good.stderr
     assert "degrees of freedom m - r - s = 1" in good.stdout
     bad = write_model(tmp_path, "coordinates = 'q1'")
     failed = subprocess.run([sys.executable, "-m", "kronlag.cli", "derive", str(bad)], capture_output=True,
-                            text=True, timeout=120)
+                            text=True, timeout=1800)
     assert failed.returncode == 2
     assert failed.stderr == f"kronlag: error: {bad}: coordinates: expected a non-empty list of names, " \
                             "got a string ('q1')\n"
@@ -253,3 +260,169 @@ def test_progress_bar_stays_silent_off_a_terminal():
     bar(5.0)
     bar.close()
     assert log.getvalue() == ""
+
+
+# -- outputs: checked before the run, all written after it, the result never lost ----------------
+
+
+@pytest.fixture
+def no_simulation(monkeypatch):
+    """Fail the test if the CLI starts simulating."""
+    def refuse(*args, **kwargs):
+        raise AssertionError("simulated although an output option was bad")
+    monkeypatch.setattr(cli, "simulate_model", refuse)
+
+
+def without_module(monkeypatch, missing: str):
+    find_spec = cli.importlib.util.find_spec
+    monkeypatch.setattr(cli.importlib.util, "find_spec", lambda name: None if name == missing else find_spec(name))
+
+
+@pytest.mark.parametrize("argv, message, setup", [
+    (["--animate", "{tmp}/run.mp4"], "--animate {tmp}/run.mp4: writing .mp4 needs ffmpeg",
+     lambda mp: mp.setattr(animation.shutil, "which", lambda name: None)),
+    (["--output", "{tmp}/run.parquet"], "--output {tmp}/run.parquet: writing .parquet needs pandas and pyarrow",
+     lambda mp: without_module(mp, "pyarrow")),
+    (["--plot", "{tmp}/file.txt/fig.png"], "--plot {tmp}/file.txt/fig.png: cannot write there", None),
+    (["--output", "{tmp}/run.csv", "--animate", "{tmp}/run.gif", "--fps", "60"], "at most 50 frames per second",
+     None),
+    (["--output", "{tmp}/run.xlsx"], "the file name must end in .csv, .npz, .parquet", None),
+])
+def test_outputs_are_checked_before_the_run(capsys, tmp_path, monkeypatch, no_simulation, argv, message, setup):
+    (tmp_path / "file.txt").write_text("a file, not a folder")
+    if setup:
+        setup(monkeypatch)
+    code, out, err = run(capsys, "simulate", "four_bar", *(arg.format(tmp=tmp_path) for arg in argv))
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("kronlag: error: ") and message.format(tmp=tmp_path) in err
+    assert out == "" and sorted(path.name for path in tmp_path.iterdir()) == ["file.txt"]  # nothing written
+
+
+def test_animating_a_model_without_drawing_hints_is_refused_first(capsys, tmp_path, no_simulation):
+    code, _, err = run(capsys, "simulate", write_model(tmp_path, POINT_MASS), "--animate", tmp_path / "x.gif")
+    assert code == 2 and "has no [[drawing]] or [[traces]] to draw" in err
+
+
+def test_speed_and_duration_exclude_each_other(capsys, no_simulation):
+    code, _, err = run(capsys, "simulate", "four_bar", "--speed", "2", "--duration", "1")
+    assert code == 2 and "not allowed with" in err
+
+
+def test_a_failing_output_does_not_stop_the_others(capsys, tmp_path, monkeypatch):
+    def full_disk(self, *args, **kwargs):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(Trajectory, "animate", full_disk)
+    csv, figure, movie = tmp_path / "run.csv", tmp_path / "run.png", tmp_path / "run.gif"
+    code, out, err = run(capsys, "simulate", "four_bar", "--t-end", "0.2", "--animate", movie, "--output", csv,
+                         "--plot", figure)
+    assert code == 1
+    assert csv.stat().st_size > 0 and figure.stat().st_size > 0 and f"wrote {csv}" in out
+    assert f"could not write --animate {movie}: OSError" in err and "No space left on device" in err
+    assert f"the results are saved in {csv}" in err
+
+
+def test_a_trajectory_no_output_holds_is_saved_in_the_working_folder(capsys, tmp_path, monkeypatch):
+    def broken(self, *args, **kwargs):
+        raise RuntimeError("the plot broke")
+    monkeypatch.setattr(Trajectory, "plot", broken)
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run(capsys, "simulate", "four_bar", "--t-end", "0.2", "--plot", "run.png")
+    assert code == 1 and "the plot broke" in err
+    rescued = tmp_path / "four_bar-trajectory.npz"
+    assert f"saved in {rescued}" in err
+    assert np.load(rescued)["t"][-1] == pytest.approx(0.2)
+
+
+def test_outputs_go_into_a_new_folder(capsys, tmp_path):
+    target = tmp_path / "out" / "deeper" / "run.npz"
+    code, _, err = run(capsys, "simulate", "four_bar", "--t-end", "0.1", "--output", target)
+    assert code == 0, err
+    assert target.exists()
+
+
+def test_step_limit_is_reported_with_the_option_to_raise_it(capsys, tmp_path):
+    target = tmp_path / "run.csv"
+    code, out, err = run(capsys, "simulate", "four_bar", "--t-end", "5", "--max-steps", "40", "--output", target)
+    assert code == 1
+    assert "simulation failed" in err and "--max-steps" in err and str(target) in err
+    assert "40 steps" in out
+    times = np.genfromtxt(target, delimiter=",", names=True)["t"]
+    assert 0 < times[-1] < 5
+
+
+@pytest.mark.parametrize("options, times", [
+    (["--dt", "0.05"], np.arange(5) * 0.05),
+    (["--dt", "0.15"], np.array([0.0, 0.15, 0.2])),  # the end is always an output time
+    (["--points", "3"], np.array([0.0, 0.1, 0.2])),
+    ([], np.linspace(0.0, 0.2, 1001)),  # default: at least 1001 points
+])
+def test_output_grid(capsys, tmp_path, options, times):
+    target = tmp_path / "run.csv"
+    code, _, err = run(capsys, "simulate", "four_bar", "--t-end", "0.2", *options, "--output", target)
+    assert code == 0, err
+    np.testing.assert_allclose(np.genfromtxt(target, delimiter=",", names=True)["t"], times, atol=1e-12)
+
+
+def test_default_grid_is_bounded_for_long_runs():
+    assert cli._default_points(3.0) == 1001
+    assert cli._default_points(50.0) == 5001  # a point every 0.01 s
+    assert cli._default_points(1e4) == 100_001  # 10^4 s in bounded memory
+
+
+def test_dt_and_points_exclude_each_other(capsys, no_simulation):
+    code, _, err = run(capsys, "simulate", "four_bar", "--dt", "0.1", "--points", "5")
+    assert code == 2 and "not allowed with" in err
+
+
+@pytest.mark.parametrize("options, frames, delay", [
+    (["--fps", "10", "--speed", "0.5"], 9, 100),  # 0.4 s shown in 0.8 s: 9 frames, 1/10 s apart
+    (["--fps", "25", "--duration", "1.6"], 41, 40),
+    ([], 11, 40),  # real time at 25 fps
+])
+def test_animation_timing_options(capsys, tmp_path, options, frames, delay):
+    movie = tmp_path / "run.gif"
+    code, _, err = run(capsys, "simulate", "four_bar", "--t-end", "0.4", "--animate", movie, *options)
+    assert code == 0, err
+    delays = [frame.info["duration"] for frame in ImageSequence.Iterator(Image.open(movie))]
+    assert len(delays) == frames and set(delays) == {delay}
+
+
+def test_inverse_plot_with_units(capsys, tmp_path):
+    figure = tmp_path / "torque.png"
+    code, _, err = run(capsys, "inverse", "four_bar", "--dt", "0.1", "--plot", figure)
+    assert code == 0, err
+    assert Image.open(figure).size[0] > 300
+
+
+@pytest.mark.parametrize("name, units", [
+    ("four_bar", {"q1": "rad", "q2": "rad", "q3": "rad", "t": "s", "energy": "J"}),
+    ("slider_crank", {"q1": "rad", "q2": "rad", "x": "m", "t": "s", "energy": "J"}),
+    ("chaplygin_sleigh", {"x": "m", "y": "m", "theta": "rad"}),  # no unit written with s: time left out
+])
+def test_units_come_from_the_model_file(name, units):
+    assert model_units(resolve_model(name)) == units
+
+
+def test_no_units_are_guessed(tmp_path):
+    assert model_units(resolve_model(str(write_model(tmp_path, POINT_MASS)))) == {}
+
+
+def test_too_fast_an_animation_gets_a_slower_speed_suggested(capsys, tmp_path):
+    movie = tmp_path / "run.gif"
+    # The four-bar's crank reaches about 20 rad/s near t = 0.6: 4 x 20 / 25 = 3.2 rad between frames.
+    code, _, err = run(capsys, "simulate", "four_bar", "--t-end", "1", "--animate", movie, "--speed", "4")
+    assert code == 0 and movie.exists()
+    assert "between frames" in err
+    suggested = float(re.search(r"--speed (\S+) \(or a higher --fps\)", err)[1])
+    assert 0 < suggested < 4
+    code, _, err = run(capsys, "simulate", "four_bar", "--t-end", "1", "--animate", movie, "--speed", suggested)
+    assert code == 0 and "between frames" not in err
+
+
+@pytest.mark.slow
+def test_singular_configuration_is_explained(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # where the trajectory is rescued
+    text = example_path("heavy_top").read_text().replace("theta = 0.5", "theta = 0.0")  # gimbal lock
+    code, _, err = run(capsys, "simulate", write_model(tmp_path, text, "top.toml"), "--t-end", "0.1")
+    assert code == 1
+    assert "singular configuration" in err and f"saved in {tmp_path / 'heavy_top-trajectory.npz'}" in err

@@ -226,19 +226,21 @@ def test_unsupported_function_is_a_clear_error():
 BENCH = Path(__file__).resolve().parents[1] / "bench"
 
 
+@pytest.mark.slow
 @needs_compiler
 def test_bench_build_smoke():
     process = subprocess.run([sys.executable, str(BENCH / "bench_build.py"), "--n", "4"], capture_output=True,
-                             text=True, timeout=120)
+                             text=True, timeout=1800)
     assert process.returncode == 0, process.stdout + process.stderr
     assert "closed_chain(4, 'relative')" in process.stdout and "OVER" not in process.stdout
 
 
+@pytest.mark.slow
 @needs_compiler
 def test_bench_forward_dynamics_smoke():
     pytest.importorskip("pinocchio")
     process = subprocess.run([sys.executable, str(BENCH / "bench_forward_dynamics.py"), "--n", "3", "--quick"],
-                             capture_output=True, text=True, timeout=120)
+                             capture_output=True, text=True, timeout=1800)
     assert process.returncode == 0, process.stdout + process.stderr
     assert "pinocchio constraintDynamics" in process.stdout
 

@@ -9,7 +9,8 @@ import pytest
 from PIL import Image
 from synthetic_trajectories import four_bar_trajectory, heavy_top_trajectory
 
-from kronlag.plotting import plot_trajectory
+from kronlag.plotting import plot_inverse_dynamics, plot_trajectory
+from kronlag.workflows import InverseDynamicsRun
 
 CONSTRAINED_PANELS = ["Coordinates", "Velocities", "Lagrange multipliers", "Constraint drift", "Energy",
                       "Total-energy drift"]
@@ -92,3 +93,27 @@ def test_show_uses_pyplot(four_bar, monkeypatch):
         assert plt.fignum_exists(figure.number)
     finally:
         plt.close(figure)
+
+
+def test_labels_carry_the_units_given_and_no_others(four_bar):
+    figure = plot_trajectory(four_bar, units={"q1": "rad", "q3": "rad", "t": "s", "energy": "J"})
+    panels = dict(zip(CONSTRAINED_PANELS, figure.axes))
+    assert _legend_labels(panels["Coordinates"]) == ["$q_{1}$ (rad)", "$q_{2}$", "$q_{3}$ (rad)"]
+    assert _legend_labels(panels["Velocities"]) == [r"$\dot{q}_{1}$ (rad/s)", r"$\dot{q}_{2}$",
+                                                    r"$\dot{q}_{3}$ (rad/s)"]
+    assert panels["Energy"].get_ylabel() == "energy (J)"
+    assert [axes.get_xlabel() for axes in figure.axes[-2:]] == ["time $t$ (s)"] * 2
+
+
+def test_inverse_dynamics_figure():
+    t = np.linspace(0.0, 1.0, 11)
+    q = np.column_stack([t, 2 * t])
+    run = InverseDynamicsRun(actuated=("a",), coordinate_names=("a", "x"), t=t, q=q, qd=np.ones_like(q),
+                             qdd=np.zeros_like(q), forces=np.sin(t)[:, None], lam=np.cos(t)[:, None],
+                             mu=np.zeros((11, 0)))
+    figure = plot_inverse_dynamics(run, units={"a": "rad", "t": "s", "energy": "J"})
+    assert _titles(figure) == ["Driven coordinates", "Actuator forces", "Lagrange multipliers"]
+    assert _legend_labels(figure.axes[1]) == ["on $a$ (N*m)"]
+    np.testing.assert_array_equal(figure.axes[1].lines[0].get_ydata(), np.sin(t))
+    np.testing.assert_array_equal(figure.axes[0].lines[0].get_ydata(), t)
+    assert figure.axes[-1].get_xlabel() == "time $t$ (s)"

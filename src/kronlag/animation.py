@@ -9,18 +9,25 @@ a self-contained HTML page; :func:`render_frame` saves a single frame.
 
 Links are drawn as lines and joints as dots at the polyline vertices; points
 that do not depend on the coordinates (ground pivots) get a grey triangle,
-and each traced point leaves its path behind it.  Planar models are drawn
-with equal axis scales, spatial ones (3-vector points) in a 3-D view; the
-axis limits are fixed, computed from all frames.
+and each traced point leaves its path behind it.  Spatial models (3-vector
+points) are drawn in a fixed oblique view with the x, y, z axes at the origin.
+The view is fitted once around all frames.
+
+Frames are drawn directly with Pillow (GIF, MP4 through ffmpeg) or, in the
+HTML page, by a small script on a canvas from the pixel coordinates of the
+frames: the page holds numbers, not images, and starts playing when loaded.
+Frame ``k`` shows simulated time ``t0 + k * speed / fps`` and is shown at
+``k / fps`` seconds of playing time: real time for ``speed = 1``.
 """
 
 from __future__ import annotations
 
 import html
 import itertools
-import re
-import tempfile
-from collections.abc import Callable, Mapping
+import json
+import shutil
+import subprocess
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -30,14 +37,13 @@ import numpy as np
 import sympy as sp
 
 if TYPE_CHECKING:
-    from matplotlib.animation import AbstractMovieWriter
-    from matplotlib.figure import Figure
+    from PIL.Image import Image
 
     from .numeric import NumericModel
     from .system import System
     from .trajectory import Trajectory
 
-__all__ = ["animate", "render_frame", "SUPPORTED_FORMATS"]
+__all__ = ["animate", "render_frame", "check_animation_target", "playing_speed", "SUPPORTED_FORMATS"]
 
 #: File extensions :func:`animate` writes.
 SUPPORTED_FORMATS = (".gif", ".mp4", ".html", ".htm")
@@ -45,19 +51,10 @@ SUPPORTED_FORMATS = (".gif", ".mp4", ".html", ".htm")
 #: Points of the traced paths per interval between frames: the paths stay smooth at low frame rates.
 _PATH_SUBSTEPS = 8
 
-ParameterValues = Mapping[str | sp.Symbol, float | Callable[[float], float]]
+#: GIF frame delays are whole hundredths of a second, and browsers slow down delays below 2/100 s.
+_GIF_MAX_FPS = 50
 
-_HTML_PAGE = """<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<title>{title}</title>
-</head>
-<body>
-{body}
-</body>
-</html>
-"""
+ParameterValues = Mapping[str | sp.Symbol, float | Callable[[float], float]]
 
 
 # -- evaluating the drawing hints ---------------------------------------------------
@@ -148,150 +145,327 @@ def _resample(traj: Trajectory, times: np.ndarray) -> np.ndarray:
     return CubicHermiteSpline(sample_times, traj.q[first], traj.qd[first], axis=0)(times)
 
 
+# -- timing -------------------------------------------------------------------------
+
+
+def playing_speed(span: float, *, fps: float, speed: float | None, duration: float | None) -> float:
+    """Simulated seconds per second of playing time: ``speed``, or ``span / duration``, or 1 (real time).
+
+    Raises
+    ------
+    ValueError
+        A non-positive ``fps``, ``speed`` or ``duration``, or both of the latter.
+    """
+    if duration is not None and speed is not None:
+        raise ValueError("give the playing speed or the duration of an animation, not both")
+    for name, value in (("fps", fps), ("speed", speed), ("duration", duration)):
+        if value is not None and not (value > 0 and np.isfinite(value)):
+            raise ValueError(f"{name} must be positive, got {value}")
+    if duration is not None and span > 0:
+        return span / duration
+    return speed or 1.0
+
+
+def _frame_times(t0: float, t1: float, *, fps: float, speed: float) -> np.ndarray:
+    """Simulated times of the frames, ``t0 + k * speed / fps`` up to ``t1``."""
+    interval = speed / fps
+    count = int(np.floor((t1 - t0) / interval * (1 + 1e-12))) + 1 if t1 > t0 else 1
+    return t0 + interval * np.arange(count)
+
+
+def _gif_delays(count: int, fps: float) -> list[int]:
+    """Delays of ``count`` GIF frames in milliseconds, whole hundredths of a second whose running
+    sums stay within 5 ms of ``k / fps``: exact timing for 25 or 50 fps, rounding spread out otherwise."""
+    ticks = np.round(np.arange(count + 1) * 100.0 / fps).astype(int)
+    return [10 * int(delay) for delay in np.diff(ticks)]
+
+
 # -- drawing ------------------------------------------------------------------------
 
+#: matplotlib's default colour cycle (tab10), for the lines and then the traced points.
+_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+           "#bcbd22", "#17becf")
+_WHITE, _BLACK, _GROUND, _AXES = "#ffffff", "#000000", "#999999", "#c8c8c8"
 
-def _set_points(artist, points: np.ndarray) -> None:
-    """Move a line artist to ``points`` (n, 2) or (n, 3)."""
-    if points.shape[1] == 3:
-        artist.set_data_3d(*points.T)
-    else:
-        artist.set_data(*points.T)
+#: View direction of spatial models (matplotlib's default 3-D view): azimuth and elevation.
+_AZIMUTH, _ELEVATION = np.radians(-60.0), np.radians(30.0)
 
 
-class _Scene:
-    """A figure showing the mechanism at one frame at a time, with axis limits that fit all frames."""
+def _screen_axes() -> np.ndarray:
+    """Rows: the unit vectors pointing right and up on the screen, for the view (_AZIMUTH, _ELEVATION)."""
+    ca, sa, ce, se = np.cos(_AZIMUTH), np.sin(_AZIMUTH), np.cos(_ELEVATION), np.sin(_ELEVATION)
+    return np.array([[-sa, ca, 0.0], [-se * ca, -se * sa, ce]])
 
-    _FIGURE_WIDTH = 6.0  # inches
-    _RATIOS = (0.5, 1.5)  # smallest and largest height/width of a planar view
 
-    def __init__(self, drawing: _Drawing, *, trace: bool, dpi: float):
-        from matplotlib.figure import Figure
+def _pale(color: str) -> str:
+    """``color`` mixed half and half with white: the colour of a traced path."""
+    rgb = np.array([int(color[k:k + 2], 16) for k in (1, 3, 5)])
+    return "#" + "".join(f"{value:02x}" for value in (rgb + 255) // 2)
 
+
+class _Picture:
+    """The mechanism in pixels: a view fitted around all frames, ``width`` pixels wide.
+
+    Points are mapped to pixel coordinates (origin top left, y down) once;
+    :meth:`images` draws the frames with Pillow and :meth:`html` hands the
+    same coordinates to a canvas script, so both show the same picture.
+    """
+
+    _TITLE_HEIGHT = 28  # pixels above the view
+    _RATIOS = (0.5, 1.5)  # smallest and largest height/width of the view
+
+    def __init__(self, drawing: _Drawing, *, width: int, trace: bool):
         self.drawing = drawing
-        lower, upper = self._limits(drawing)
-        planar = drawing.dimension == 2
-        height = self._FIGURE_WIDTH
-        if planar:
-            height *= (upper[1] - lower[1]) / (upper[0] - lower[0])
-        self.figure = Figure(figsize=(self._FIGURE_WIDTH, height + 0.8), dpi=dpi, layout="constrained")
-        axes = self.figure.add_subplot(projection=None if planar else "3d")
-        for axis, low, high in zip("xyz", lower, upper):
-            getattr(axes, f"set_{axis}lim")(low, high)
-            getattr(axes, f"set_{axis}label")(axis)
-        if planar:
-            axes.set_aspect("equal")
-            axes.grid(True, alpha=0.25)
-        else:
-            axes.set_box_aspect((1, 1, 1), zoom=0.9)  # room for the z label
-        self.title = axes.set_title("")  # the model's name and the time, set by show()
-
-        if len(drawing.fixed_points):
-            axes.plot(*drawing.fixed_points.T, linestyle="none", marker="^", markersize=14, color="0.6",
-                      zorder=1)
-        colors = (f"C{k}" for k in itertools.count())
-        self.lines = {name: axes.plot(*points[0].T, color=next(colors), linewidth=3, marker="o", markersize=7,
-                                      markerfacecolor="white", markeredgewidth=2, solid_capstyle="round",
-                                      label=name, zorder=3)[0]
-                      for name, points in drawing.lines.items()}
-        self.paths, self.tracers = {}, {}
-        if trace:
-            for name, path in drawing.traces.items():
-                color = next(colors)
-                self.paths[name] = axes.plot(*path[:1].T, color=color, linewidth=1.2, alpha=0.8, label=name,
-                                             zorder=2)[0]
-                self.tracers[name] = axes.plot(*path[:1].T, color=color, marker="o", markersize=4, zorder=4)[0]
-        if self.lines or self.paths:  # below the view, where it cannot hide the mechanism
-            self.figure.legend(loc="outside lower center", ncols=min(len(self.lines) + len(self.paths), 4),
-                               fontsize="small", frameon=False)
-        # Lay out once: frames only move artists inside the axes and change the title's digits; a layout
-        # engine would redo the layout for every frame.
-        self.show(0)
-        self.figure.draw_without_rendering()
-        self.figure.set_layout_engine("none")
-
-    @classmethod
-    def _limits(cls, drawing: _Drawing) -> tuple[np.ndarray, np.ndarray]:
-        """Axis limits: the padded box around all points; a cube in 3-D, in the plane widened or
-        heightened to a height/width ratio within ``_RATIOS`` so that the view fills the figure."""
-        points = drawing.all_points()
-        low, high = points.min(axis=0), points.max(axis=0)
+        project = (lambda points: points) if drawing.dimension == 2 else (lambda points: points @ _screen_axes().T)
+        lines = {name: project(points) for name, points in drawing.lines.items()}
+        traces = {name: project(path) for name, path in drawing.traces.items()} if trace else {}
+        fixed = project(drawing.fixed_points)
+        axes = self._axis_segments(drawing)
+        everything = np.concatenate([points.reshape(-1, 2) for points in lines.values()]
+                                    + list(traces.values()) + [fixed, project(axes).reshape(-1, 2)])
+        low, high = everything.min(axis=0), everything.max(axis=0)
         size = (high - low).max() or 1.0
         span = 1.1 * (high - low) + 0.1 * size
-        if drawing.dimension == 3:
-            span[:] = span.max()
-        else:
-            smallest, largest = cls._RATIOS
-            span = np.array([max(span[0], span[1] / largest), max(span[1], span[0] * smallest)])
+        smallest, largest = self._RATIOS
+        span = np.array([max(span[0], span[1] / largest), max(span[1], span[0] * smallest)])
         middle = (low + high) / 2
-        return middle - span / 2, middle + span / 2
+        self.scale = (width - 1) / span[0]  # pixels per model length
+        self.corner = np.array([middle[0] - span[0] / 2, middle[1] + span[1] / 2])  # top left, model units
+        self.legend = [(name, _COLORS[k % len(_COLORS)]) for k, name in enumerate([*lines, *traces])]
+        legend_height = 22 if self.legend else 0
+        view_height = int(np.ceil(span[1] * self.scale))
+        height = self._TITLE_HEIGHT + view_height + legend_height
+        self.size = (width + width % 2, height + height % 2)  # even sizes, as video encoders want
+        self.lines = {name: self._pixels(points) for name, points in lines.items()}
+        self.traces = {name: self._pixels(path) for name, path in traces.items()}
+        self.fixed = self._pixels(fixed)
+        self.axes = self._pixels(project(axes))
+        self.line_width = max(2, round(width / 160))
 
-    def show(self, frame: int) -> None:
-        """Put the mechanism in its position at ``frame``."""
-        drawing = self.drawing
-        index = drawing.frames[frame]
-        for name, line in self.lines.items():
-            _set_points(line, drawing.lines[name][index])
-        for name, path in self.paths.items():
-            _set_points(path, drawing.traces[name][:index + 1])
-            _set_points(self.tracers[name], drawing.traces[name][index:index + 1])
-        self.title.set_text(f"{drawing.title}    t = {drawing.times[index]:.3f}")
+    @staticmethod
+    def _axis_segments(drawing: _Drawing) -> np.ndarray:
+        """The x, y and z axes from the origin, a fifth of the drawing's size long (spatial models), (k, 2, 3)."""
+        if drawing.dimension == 2:
+            return np.zeros((0, 2, 2))
+        points = drawing.all_points()
+        length = 0.2 * ((points.max(axis=0) - points.min(axis=0)).max() or 1.0)
+        return np.stack([np.zeros((3, 3)), length * np.eye(3)], axis=1)
 
-    def record(self, writer: AbstractMovieWriter, path: Path, dpi: float) -> None:
-        """Write every frame with a matplotlib movie writer."""
-        with writer.saving(self.figure, path, dpi):
-            for frame in range(len(self.drawing.frames)):
-                self.show(frame)
-                writer.grab_frame()
+    def _pixels(self, points: np.ndarray) -> np.ndarray:
+        """Integer pixel coordinates (..., 2) of model points (..., 2)."""
+        offset = (points - self.corner) * self.scale * np.array([1.0, -1.0])
+        return np.rint(offset + [0.0, self._TITLE_HEIGHT]).astype(int)
+
+    def title(self, frame: int) -> str:
+        return f"{self.drawing.title}    t = {self.drawing.times[self.drawing.frames[frame]]:.3f}"
+
+    def images(self) -> Iterator[Image]:
+        """The frames as palette images (palette: white, then the colours used)."""
+        from PIL import Image, ImageDraw, ImageFont
+
+        colors = [_WHITE, _BLACK, _GROUND, _AXES, *(color for _, color in self.legend),
+                  *(_pale(color) for _, color in self.legend)]
+        index = {color: k for k, color in reversed(list(enumerate(colors)))}
+        palette = [int(color[k:k + 2], 16) for color in colors for k in (1, 3, 5)]
+        font = ImageFont.load_default(size=14)
+        width, radius = self.line_width, self.line_width + 1
+        background = Image.new("P", self.size, 0)
+        background.putpalette(palette)
+        draw = ImageDraw.Draw(background)
+        for (start, end), label in zip(self.axes, "xyz"):
+            draw.line([tuple(start), tuple(end)], fill=index[_AXES], width=1)
+            draw.text(tuple(end + 3), label, fill=index[_GROUND], font=font)
+        for x, y in self.fixed:
+            side = 3 * width
+            draw.polygon([(x, y), (x - side, y + 2 * side), (x + side, y + 2 * side)], fill=index[_GROUND])
+        x = 8
+        for name, color in self.legend:
+            y = self.size[1] - 12
+            draw.line([(x, y), (x + 20, y)], fill=index[color], width=width)
+            draw.text((x + 26, y - 8), name, fill=index[_BLACK], font=font)
+            x += 40 + round(draw.textlength(name, font=font))
+        colors_of = dict(self.legend)
+        drawn_to = 0  # the traced paths are drawn on the background up to this time index
+        for frame, time_index in enumerate(self.drawing.frames):
+            background_draw = ImageDraw.Draw(background)
+            for name, path in self.traces.items():
+                segment = [tuple(point) for point in path[max(drawn_to - 1, 0):time_index + 1]]
+                if len(segment) > 1:
+                    background_draw.line(segment, fill=index[_pale(colors_of[name])], width=max(1, width // 2))
+            drawn_to = time_index + 1
+            image = background.copy()
+            draw = ImageDraw.Draw(image)
+            draw.text((8, 6), self.title(frame), fill=index[_BLACK], font=font)
+            for name, points in self.lines.items():
+                vertices = [tuple(point) for point in points[time_index]]
+                draw.line(vertices, fill=index[colors_of[name]], width=width, joint="curve")
+                for x, y in vertices:
+                    draw.ellipse([x - radius, y - radius, x + radius, y + radius], fill=index[_WHITE],
+                                 outline=index[colors_of[name]], width=max(1, width - 1))
+            for name, path in self.traces.items():
+                x, y = path[time_index]
+                draw.ellipse([x - radius, y - radius, x + radius, y + radius], fill=index[colors_of[name]])
+            yield image
+
+    def html(self, *, fps: float, speed: float) -> str:
+        """A page whose script draws the frames on a canvas, in a loop from when it is loaded
+        (a click pauses and resumes); frame coordinates are inlined as JSON integers."""
+        frames = self.drawing.frames
+        data = {
+            "fps": fps, "count": len(frames), "substeps": _PATH_SUBSTEPS, "title": self.drawing.title,
+            "t0": float(self.drawing.times[0]), "step": speed / fps, "width": self.line_width,
+            "lines": [{"color": dict(self.legend)[name], "xy": points[frames].ravel().tolist()}
+                      for name, points in self.lines.items()],
+            "traces": [{"color": dict(self.legend)[name], "pale": _pale(dict(self.legend)[name]),
+                        "xy": path.ravel().tolist()} for name, path in self.traces.items()],
+            "fixed": self.fixed.ravel().tolist(), "axes": self.axes.reshape(-1, 4).tolist(),
+            "legend": self.legend, "colors": {"ground": _GROUND, "axes": _AXES},
+        }
+        return _HTML_PAGE.format(title=html.escape(self.drawing.title), width=self.size[0], height=self.size[1],
+                                 data=json.dumps(data, separators=(",", ":")).replace("</", "<\\/"),
+                                 script=_CANVAS_SCRIPT)
+
+
+_HTML_PAGE = """<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<title>{title}</title>
+<style>body {{ margin: 0; background: #fff; }} canvas {{ display: block; cursor: pointer; }}</style>
+</head>
+<body>
+<canvas id="animation" width="{width}" height="{height}" title="click to pause or resume"></canvas>
+<script>
+const D = {data};
+{script}
+</script>
+</body>
+</html>
+"""
+
+#: Draws frame k of D (the data of _Picture.html) on the canvas, as _Picture.images does with Pillow.
+_CANVAS_SCRIPT = r"""
+const canvas = document.getElementById("animation"), g = canvas.getContext("2d");
+const w = D.width, r = D.width + 1;
+g.font = "14px sans-serif";
+function polyline(xy, from, to, color, width) {
+  g.beginPath(); g.strokeStyle = color; g.lineWidth = width; g.lineJoin = g.lineCap = "round";
+  for (let i = from; i < to; i += 2) { if (i === from) g.moveTo(xy[i], xy[i + 1]); else g.lineTo(xy[i], xy[i + 1]); }
+  g.stroke();
+}
+function dot(x, y, fill, stroke) {
+  g.beginPath(); g.arc(x, y, r, 0, 2 * Math.PI); g.fillStyle = fill; g.fill();
+  if (stroke) { g.strokeStyle = stroke; g.lineWidth = Math.max(1, w - 1); g.stroke(); }
+}
+function draw(k) {
+  g.fillStyle = "#fff"; g.fillRect(0, 0, canvas.width, canvas.height);
+  g.fillStyle = D.colors.ground; g.textBaseline = "top";
+  for (const [x0, y0, x1, y1] of D.axes) { polyline([x0, y0, x1, y1], 0, 4, D.colors.axes, 1); }
+  D.axes.forEach(([x0, y0, x1, y1], i) => g.fillText("xyz"[i], x1 + 3, y1 + 3));
+  for (let i = 0; i < D.fixed.length; i += 2) {
+    const x = D.fixed[i], y = D.fixed[i + 1], s = 3 * w;
+    g.beginPath(); g.moveTo(x, y); g.lineTo(x - s, y + 2 * s); g.lineTo(x + s, y + 2 * s); g.closePath(); g.fill();
+  }
+  const last = k * D.substeps;
+  for (const t of D.traces) { polyline(t.xy, 0, 2 * last + 2, t.pale, Math.max(1, Math.floor(w / 2))); }
+  for (const line of D.lines) {
+    const n = line.xy.length / D.count, xy = line.xy.slice(k * n, (k + 1) * n);
+    polyline(xy, 0, n, line.color, w);
+    for (let i = 0; i < n; i += 2) dot(xy[i], xy[i + 1], "#fff", line.color);
+  }
+  for (const t of D.traces) dot(t.xy[2 * last], t.xy[2 * last + 1], t.color);
+  g.fillStyle = "#000";
+  g.fillText(D.title + "    t = " + (D.t0 + k * D.step).toFixed(3), 8, 6);
+  let x = 8; const y = canvas.height - 12;
+  for (const [name, color] of D.legend) {
+    polyline([x, y, x + 20, y], 0, 4, color, w);
+    g.fillStyle = "#000"; g.fillText(name, x + 26, y - 8);
+    x += 40 + g.measureText(name).width;
+  }
+}
+// Each frame is drawn at its playing time, k / fps seconds after the start, by a timer set to the next
+// frame's time (timers also follow the virtual clock of a headless browser, where animation frames stop).
+let origin = performance.now(), pausedAt = null;
+function tick() {
+  if (pausedAt !== null) return;
+  const elapsed = (performance.now() - origin) * D.fps / 1000, k = Math.floor(elapsed);
+  draw(k % D.count);
+  setTimeout(tick, (k + 1 - elapsed) * 1000 / D.fps);
+}
+canvas.addEventListener("click", () => {
+  if (pausedAt === null) { pausedAt = performance.now(); return; }
+  origin += performance.now() - pausedAt; pausedAt = null; tick();
+});
+tick();
+""".strip()
 
 
 # -- output -------------------------------------------------------------------------
 
 
-#: Text for the player's buttons, whose icons matplotlib takes from a web font on a CDN.
-_BUTTON_TEXT = {"fa-minus": "\u2212", "fa-fast-backward": "|\u25c0\u25c0", "fa-step-backward": "|\u25c0",
-                "fa-play fa-flip-horizontal": "\u25c0", "fa-pause": "\u275a\u275a", "fa-play": "\u25b6",
-                "fa-step-forward": "\u25b6|", "fa-fast-forward": "\u25b6\u25b6|", "fa-plus": "+"}
+def _ffmpeg() -> str:
+    """The path of the ffmpeg program."""
+    program = shutil.which("ffmpeg")
+    if program is None:
+        raise RuntimeError("writing .mp4 needs ffmpeg, which was not found on the PATH (install it); "
+                           ".gif and .html work without it")
+    return program
 
 
-def _self_contained(fragment: str) -> str:
-    """matplotlib's HTML player without its external stylesheet: icon elements become text."""
-    fragment = re.sub(r"<link\b[^>]*>", "", fragment)
-    return re.sub(r'<i class="fa ([^"]*)"></i>',
-                  lambda icon: _BUTTON_TEXT.get(icon[1], icon[1].replace("fa-", "")), fragment)
+def check_animation_target(path: str | PathLike, *, fps: float = 25.0) -> str:
+    """Check, before any work, that :func:`animate` can write ``path`` at ``fps``; return its suffix.
+
+    Raises
+    ------
+    ValueError
+        Unsupported extension, or a GIF faster than 50 frames per second.
+    RuntimeError
+        ``.mp4`` without ffmpeg.
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix not in SUPPORTED_FORMATS:
+        raise ValueError(f"cannot write an animation to {str(path)!r}: "
+                         f"the file extension must be one of {', '.join(SUPPORTED_FORMATS)}")
+    if suffix == ".gif" and fps > _GIF_MAX_FPS:
+        raise ValueError(f"a GIF plays at most {_GIF_MAX_FPS} frames per second (delays are whole hundredths of "
+                         f"a second), got fps = {fps:g}; use a lower --fps or .html/.mp4")
+    if suffix == ".mp4":
+        _ffmpeg()
+    return suffix
 
 
-def _html_page(scene: _Scene, *, fps: float, dpi: float) -> str:
-    """A self-contained HTML page (frames embedded as base64 PNG) that plays the animation."""
-    from matplotlib.animation import HTMLWriter
-
-    with tempfile.TemporaryDirectory() as folder:
-        fragment = Path(folder) / "animation.html"
-        scene.record(HTMLWriter(fps=fps, embed_frames=True), fragment, dpi)
-        body = _self_contained(fragment.read_text(encoding="utf-8"))
-    return _HTML_PAGE.format(title=html.escape(scene.drawing.title), body=body)
+def _write_gif(picture: _Picture, path: Path, fps: float) -> None:
+    first, *rest = picture.images()
+    first.save(path, save_all=True, append_images=rest, duration=_gif_delays(1 + len(rest), fps), loop=0)
 
 
-def _movie_writer(suffix: str, fps: float) -> AbstractMovieWriter:
-    from matplotlib.animation import FFMpegWriter, PillowWriter
+def _write_mp4(picture: _Picture, path: Path, fps: float) -> None:
+    width, height = picture.size
+    command = [_ffmpeg(), "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24",
+               "-s", f"{width}x{height}", "-r", repr(float(fps)), "-i", "-", "-an", "-pix_fmt", "yuv420p",
+               str(path)]
+    with subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE) as process:
+        try:
+            for image in picture.images():
+                process.stdin.write(image.convert("RGB").tobytes())
+        except BrokenPipeError:
+            pass  # ffmpeg stopped; its message follows
+        process.stdin.close()
+        message = process.stderr.read().decode(errors="replace").strip()
+    if process.returncode:
+        raise RuntimeError(f"ffmpeg could not write {path}: {message}")
 
-    if suffix == ".gif":
-        return PillowWriter(fps=fps)
-    if not FFMpegWriter.isAvailable():
-        raise RuntimeError("writing .mp4 needs ffmpeg, which was not found (install it, or set the matplotlib "
-                           "rcParam animation.ffmpeg_path); .gif and .html work without it")
-    return FFMpegWriter(fps=fps)
 
-
-def animate(traj: Trajectory, path: str | PathLike | None = None, *, fps: float = 30,
-            duration: float | None = None, trace: bool = True, dpi: float = 100,
+def animate(traj: Trajectory, path: str | PathLike | None = None, *, fps: float = 25.0,
+            speed: float | None = None, duration: float | None = None, trace: bool = True, width: int = 480,
             parameters: ParameterValues | None = None) -> Path | str:
     """Animate the mechanism along a trajectory, from its model's drawing hints.
 
-    The coordinates are resampled to ``round(duration * fps) + 1`` frames
-    evenly spaced from the first to the last time of the trajectory (cubic
-    Hermite interpolation of ``q`` with ``qd``); the traced paths are drawn
-    with more points than frames, so that they stay smooth.
+    Frame ``k`` shows the mechanism at ``t[0] + k * speed / fps`` (coordinates
+    by cubic Hermite interpolation of ``q`` with ``qd``) and is shown ``k / fps``
+    seconds after the start: by default (``speed = 1``) the animation plays in
+    real time.  The traced paths are drawn with more points than frames, so
+    that they stay smooth.
 
     Parameters
     ----------
@@ -300,19 +474,23 @@ def animate(traj: Trajectory, path: str | PathLike | None = None, *, fps: float 
         (``model.equations.system``) and the parameter values
         (``model.parameter_vector(t)``, in the order of ``model.parameter_names``).
     path : str or path-like, optional
-        Output file: ``.gif`` (Pillow), ``.mp4`` (needs ffmpeg) or
-        ``.html``/``.htm`` (a self-contained page that plays the frames,
-        embedded as base64 PNG images, with player controls).  Without a path
-        the HTML page is returned as a string (for a notebook:
+        Output file: ``.gif`` (at most 50 fps; 25 or 50 fps give exact frame
+        delays, other rates spread the rounding to 1/100 s), ``.mp4`` (needs
+        ffmpeg) or ``.html``/``.htm`` (a self-contained page whose script draws
+        the frames on a canvas and starts when loaded; a click pauses).
+        Without a path the HTML page is returned as a string (for a notebook:
         ``IPython.display.HTML(traj.animate())``).
     fps : float
-        Frames per second of the output.
+        Frames per second of playing time.
+    speed : float, optional
+        Simulated seconds per second of playing time (default 1: real time;
+        0.1 shows a fast mechanism ten times slower).
     duration : float, optional
-        Playing time in seconds; by default the simulated time span (real time).
+        Playing time in seconds, instead of ``speed``.
     trace : bool
         Draw the paths of the model's traced points.
-    dpi : float
-        Resolution; a frame is about ``6 * dpi`` pixels wide.
+    width : int
+        Width of a frame in pixels; the height follows the drawing.
     parameters : mapping, optional
         Parameter values (by name or symbol; floats or callables of time) to
         draw with instead of the model's, e.g. to exaggerate a small part.
@@ -325,51 +503,44 @@ def animate(traj: Trajectory, path: str | PathLike | None = None, *, fps: float 
     Raises
     ------
     ValueError
-        Unsupported file extension, non-positive ``fps``/``duration``, or a
-        model without drawing hints.
+        Unsupported file extension, non-positive ``fps``/``speed``/``duration``
+        or both of the latter, a GIF above 50 fps, or a model without drawing hints.
     RuntimeError
         ``.mp4`` requested but ffmpeg is not installed.
     """
     target = None if path is None else Path(path)
-    suffix = ".html" if target is None else target.suffix.lower()
-    if suffix not in SUPPORTED_FORMATS:
-        raise ValueError(f"cannot write an animation to {str(path)!r}: "
-                         f"the file extension must be one of {', '.join(SUPPORTED_FORMATS)}")
-    if fps <= 0 or (duration is not None and duration <= 0):
-        raise ValueError(f"fps and duration must be positive, got fps={fps}, duration={duration}")
-    writer = None if suffix in (".html", ".htm") else _movie_writer(suffix, fps)
-    if duration is None:
-        duration = abs(traj.t[-1] - traj.t[0])
-    times = np.linspace(traj.t[0], traj.t[-1], round(duration * fps) + 1)
-    scene = _Scene(_evaluate_drawing(traj, times, parameters), trace=trace, dpi=dpi)
-    if writer is not None:
-        scene.record(writer, target, dpi)
-        return target
-    page = _html_page(scene, fps=fps, dpi=dpi)
-    if target is None:
-        return page
-    target.write_text(page, encoding="utf-8")
+    suffix = ".html" if target is None else check_animation_target(target, fps=fps)
+    t0, t1 = float(traj.t[0]), float(traj.t[-1])
+    speed = playing_speed(t1 - t0, fps=fps, speed=speed, duration=duration)
+    times = _frame_times(t0, t1, fps=fps, speed=speed)
+    picture = _Picture(_evaluate_drawing(traj, times, parameters), width=width, trace=trace)
+    if suffix in (".html", ".htm"):
+        page = picture.html(fps=fps, speed=speed)
+        if target is None:
+            return page
+        target.write_text(page, encoding="utf-8")
+    else:
+        {".gif": _write_gif, ".mp4": _write_mp4}[suffix](picture, target, fps)
     return target
 
 
-def render_frame(traj: Trajectory, index: int, path: str | PathLike, *, trace: bool = True, dpi: float = 100,
-                 parameters: ParameterValues | None = None) -> Figure:
+def render_frame(traj: Trajectory, index: int, path: str | PathLike, *, trace: bool = True, width: int = 480,
+                 parameters: ParameterValues | None = None) -> Image:
     """Save the mechanism at sample ``traj.t[index]`` as an image (PNG, or the format of the extension).
 
-    The figure is the one :func:`animate` draws when its frames are the
-    samples (same axis limits); the traced paths run up to ``index``.
-    Options are those of :func:`animate`.
+    The picture is the one :func:`animate` draws when its frames are the
+    samples (same view); the traced paths run up to ``index``.  Options are
+    those of :func:`animate`.
 
     Returns
     -------
-    matplotlib.figure.Figure
-        The figure, for further changes (its axes' ``transData`` maps model
-        coordinates to pixels of the saved image, origin at the bottom left).
+    PIL.Image.Image
+        The frame.
     """
     count = len(traj.t)
     if not -count <= index < count:
         raise IndexError(f"frame index {index} is out of range for a trajectory of {count} samples")
-    scene = _Scene(_evaluate_drawing(traj, np.asarray(traj.t), parameters), trace=trace, dpi=dpi)
-    scene.show(index % count)
-    scene.figure.savefig(path, dpi=dpi)
-    return scene.figure
+    picture = _Picture(_evaluate_drawing(traj, np.asarray(traj.t), parameters), width=width, trace=trace)
+    image = next(itertools.islice(picture.images(), index % count, None))
+    image.save(path)
+    return image

@@ -3,46 +3,197 @@
 MODEL is the name of a built-in model or shipped example (``kronlag models``
 lists them) or the path of a TOML model file (format: :mod:`kronlag.modelfile`).
 
-Exit status: 0 success; 2 bad input (a message on stderr, no traceback);
-1 numerical failure (what was computed is saved first).
+Exit status: 0 success; 2 bad input, found before any computation (one line
+on stderr, no traceback); 1 the run did not complete: a numerical failure or an
+output that could not be written (the other outputs are written, and what was
+computed is saved; stderr says where).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
+import re
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .animation import SUPPORTED_FORMATS, check_animation_target, playing_speed
 from .derivation import derive
 from .export import FORMATS, LANGUAGES, export_code, file_stem, format_equations
-from .modelfile import example_names, example_path, load_model, resolve_model
+from .modelfile import ModelFile, example_names, example_path, load_model, resolve_model
 from .models import BUILTIN_MODELS
+from .plotting import plot_inverse_dynamics
 from .system import ModelError
-from .workflows import check_model, inverse_dynamics_along, parse_drive, simulate_model, summarize
+from .workflows import check_model, inverse_dynamics_along, model_units, parse_drive, simulate_model, summarize
 
-EXIT_OK, EXIT_NUMERICAL, EXIT_BAD_INPUT = 0, 1, 2
-_TRAJECTORY_SUFFIXES = (".csv", ".npz", ".parquet")
+EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT = 0, 1, 2
+
+#: Default output grid of ``simulate``: a point every _GRID_SPACING of simulated time, within
+#: _GRID_POINTS points, so that a long run takes bounded memory.
+_GRID_SPACING, _GRID_POINTS = 0.01, (1001, 100_001)
+
+#: Advice appended to an integrator's failure message, by a pattern in that message.
+_FAILURE_HINTS = {
+    r"maximum number of steps|TOO_MUCH_WORK": "raise the step limit with --max-steps",
+    r"RHSFUNC_FAIL|singular": "the equations could not be evaluated, usually a singular configuration "
+                              "(a singular mass matrix or constraint Jacobian, e.g. Euler angles at gimbal lock)",
+}
+
+
+#: Largest turn of an angle coordinate between animation frames that the eye follows (radians); the CLI
+#: suggests a slower --speed above it (a crank turning half a revolution per frame seems to stand still).
+_SMOOTH_TURN = np.pi / 3
+
+
+class IncompleteRun(Exception):
+    """A run did not finish or an output could not be written; the message says what was saved."""
+
+
+@dataclass(frozen=True)
+class _OutputKind:
+    """A kind of output file: its option, file name endings, a check made before any work
+    (raising ModelError with the reason) and how the result is written."""
+
+    option: str
+    suffixes: tuple[str, ...]
+    check: Callable[[Path, argparse.Namespace, ModelFile], None]
+    write: Callable[[object, Path, argparse.Namespace, ModelFile], None]
+
+
+def _no_check(path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    """Nothing to check beyond the file name and the folder."""
+
+
+def _check_parquet(path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    if path.suffix == ".parquet" and not all(importlib.util.find_spec(name) for name in ("pandas", "pyarrow")):
+        raise ModelError(f"--output {path}: writing .parquet needs pandas and pyarrow (pip install pandas "
+                         "pyarrow); .csv and .npz need nothing more")
+
+
+def _check_animation(path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    try:
+        check_animation_target(path, fps=arguments.fps)
+    except (ValueError, RuntimeError) as error:
+        raise ModelError(f"--animate {path}: {error}") from None
+    system = model.system
+    if not system.drawing and not system.traces:
+        raise ModelError(f"--animate {path}: model {system.name!r} has no [[drawing]] or [[traces]] to draw")
+
+
+def _save_trajectory(trajectory, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    {".parquet": lambda: trajectory.to_dataframe().to_parquet(path), ".csv": lambda: trajectory.to_csv(path),
+     ".npz": lambda: trajectory.to_npz(path)}[path.suffix]()
+
+
+def _save_inverse(run, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    run.save(path)
+
+
+def _plot_trajectory(trajectory, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    trajectory.plot(path=path, units=model_units(model))
+
+
+def _animate(trajectory, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    trajectory.animate(path, fps=arguments.fps, speed=arguments.speed, duration=arguments.duration)
+    angles = [k for k, name in enumerate(trajectory.coordinate_names) if model_units(model).get(name) == "rad"]
+    speed = playing_speed(trajectory.t[-1] - trajectory.t[0], fps=arguments.fps, speed=arguments.speed,
+                          duration=arguments.duration)
+    turn = float(np.max(np.abs(trajectory.qd[:, angles]), initial=0.0)) * speed / arguments.fps
+    if turn > _SMOOTH_TURN:
+        slower = float(f"{speed * _SMOOTH_TURN / turn:.1g}")
+        print(f"note: an angle turns by up to {np.degrees(turn):.0f} degrees between frames of {path}, too fast to "
+              f"follow; --speed {slower:g} (or a higher --fps) shows the motion smoothly", file=sys.stderr)
+
+
+def _plot_inverse(run, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    plot_inverse_dynamics(run, path=path, units=model_units(model))
+
+
 _PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg")
-_ANIMATION_SUFFIXES = (".gif", ".mp4", ".html", ".htm")
-_INVERSE_SUFFIXES = (".csv", ".npz")
+_SIMULATION_OUTPUTS = (_OutputKind("--output", (".csv", ".npz", ".parquet"), _check_parquet, _save_trajectory),
+                       _OutputKind("--plot", _PLOT_SUFFIXES, _no_check, _plot_trajectory),
+                       _OutputKind("--animate", SUPPORTED_FORMATS, _check_animation, _animate))
+_INVERSE_OUTPUTS = (_OutputKind("--output", (".csv", ".npz"), _no_check, _save_inverse),
+                    _OutputKind("--plot", _PLOT_SUFFIXES, _no_check, _plot_inverse))
 
 
-class NumericalFailure(Exception):
-    """A computation failed; the message says what was saved."""
+def _requested_outputs(kinds: Sequence[_OutputKind], arguments: argparse.Namespace,
+                       model: ModelFile) -> list[tuple[_OutputKind, Path]]:
+    """The output files asked for, each checked before any work: name, folder (created if missing),
+    that a file can be written there, and what the kind needs (pyarrow, ffmpeg, drawing hints)."""
+    outputs = []
+    for kind in kinds:
+        value = getattr(arguments, kind.option.removeprefix("--"))
+        if value is None:
+            continue
+        path = Path(value)
+        if path.suffix not in kind.suffixes:
+            raise ModelError(f"{kind.option} {value}: the file name must end in {', '.join(kind.suffixes)}")
+        _check_writable(path, kind.option)
+        kind.check(path, arguments, model)
+        outputs.append((kind, path))
+    return outputs
 
 
-def _output_path(value: str | None, suffixes: Sequence[str], option: str) -> Path | None:
-    if value is None:
-        return None
-    path = Path(value)
-    if path.suffix not in suffixes:
-        raise ModelError(f"{option} {value}: the file name must end in {', '.join(suffixes)}")
-    return path
+def _check_writable(path: Path, option: str) -> None:
+    """Make sure a file can be written at ``path`` (by writing nothing to it), creating its folder."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        existed = path.exists()
+        with open(path, "ab"):
+            pass
+        if not existed:
+            path.unlink()
+    except OSError as error:
+        raise ModelError(f"{option} {path}: cannot write there ({error.strerror or error})") from None
+
+
+def _write_outputs(result, outputs: list[tuple[_OutputKind, Path]], arguments: argparse.Namespace,
+                   model: ModelFile) -> tuple[list[tuple[_OutputKind, Path]], list[str]]:
+    """Write every output; one failure does not stop the others.
+    Returns the outputs written and the failures, one line each."""
+    written, failures = [], []
+    for kind, path in outputs:
+        try:
+            kind.write(result, path, arguments, model)
+        except Exception as error:  # noqa: BLE001 - reported, and the other outputs are still written
+            failures.append(f"{kind.option} {path}: {type(error).__name__}: {error}")
+        else:
+            written.append((kind, path))
+            print(f"wrote {path}")
+    return written, failures
+
+
+def _rescue(save: Callable[[Path], None], name: str) -> Path:
+    """Save a result that no output holds: in the working folder, else in the temporary folder."""
+    for folder in (Path.cwd(), Path(tempfile.gettempdir())):
+        path = folder / name
+        try:
+            save(path)
+            return path
+        except OSError:
+            continue
+    raise IncompleteRun(f"the result could not be saved as {name} in {Path.cwd()} or {tempfile.gettempdir()}")
+
+
+def _finish_run(result, outputs: list[tuple[_OutputKind, Path]], arguments: argparse.Namespace,
+                model: ModelFile, *, failure: str, save: Callable[[Path], None], rescue_name: str) -> None:
+    """Write the outputs; if the run failed (``failure`` not empty) or an output could not be written,
+    make sure the result is saved somewhere and raise :class:`IncompleteRun` saying where."""
+    written, failures = _write_outputs(result, outputs, arguments, model)
+    if not failure and not failures:
+        return
+    saved = [path for kind, path in written if kind.option == "--output"]
+    where = saved[0] if saved else _rescue(save, rescue_name)
+    problems = ([failure] if failure else []) + [f"could not write {line}" for line in failures]
+    raise IncompleteRun("; ".join(problems) + f"; the results are saved in {where}")
 
 
 def _emit(text: str, output: str | None) -> None:
@@ -110,62 +261,52 @@ class ProgressBar:
             self.stream.flush()
 
 
+def _output_grid(t_end: float, arguments: argparse.Namespace, default_points: int) -> np.ndarray:
+    """Output times 0 .. t_end: every ``--dt``, or ``--points`` evenly spaced, or ``default_points``."""
+    if arguments.dt is not None:
+        return np.append(np.arange(0.0, t_end * (1 - 1e-12), arguments.dt), t_end)
+    return np.linspace(0.0, t_end, arguments.points or default_points)
+
+
+def _default_points(t_end: float) -> int:
+    """A point every _GRID_SPACING, within the _GRID_POINTS bounds."""
+    return int(np.clip(round(t_end / _GRID_SPACING) + 1, *_GRID_POINTS))
+
+
+def _failure_hint(message: str) -> str:
+    hints = [hint for pattern, hint in _FAILURE_HINTS.items() if re.search(pattern, message, re.IGNORECASE)]
+    return "; ".join([message.rstrip("."), *hints])
+
+
 def _simulate(arguments: argparse.Namespace) -> None:
     model = resolve_model(arguments.model)
-    output = _output_path(arguments.output, _TRAJECTORY_SUFFIXES, "--output")
-    figure = _output_path(arguments.plot, _PLOT_SUFFIXES, "--plot")
-    movie = _output_path(arguments.animate, _ANIMATION_SUFFIXES, "--animate")
+    outputs = _requested_outputs(_SIMULATION_OUTPUTS, arguments, model)
     t_end = arguments.t_end if arguments.t_end is not None else model.simulation.t_end
     bar = ProgressBar(t_end, sys.stderr)
     trajectory = simulate_model(model, t_end=t_end, method=arguments.method, rtol=arguments.rtol,
-                                atol=arguments.atol, progress=bar)
+                                atol=arguments.atol, t_eval=_output_grid(t_end, arguments, _default_points(t_end)),
+                                max_steps=arguments.max_steps, progress=bar)
     bar.close()
     print(summarize(trajectory).report())
-    if not trajectory.success:
-        saved = output or Path(f"{file_stem(model.system.name)}-partial.npz")
-        _save_trajectory(trajectory, saved)
-        reached = trajectory.t[-1] if len(trajectory.t) else 0.0
-        raise NumericalFailure(f"simulation failed ({trajectory.message.rstrip('.')}); "
-                               f"the trajectory up to t = {reached:g} is saved in {saved}")
-    if output:
-        _save_trajectory(trajectory, output)
-    if figure:
-        trajectory.plot(path=figure)
-        print(f"wrote {figure}")
-    if movie:
-        trajectory.animate(movie)
-        print(f"wrote {movie}")
-
-
-def _save_trajectory(trajectory, path: Path) -> None:
-    if path.suffix == ".parquet":
-        try:
-            trajectory.to_dataframe().to_parquet(path)
-        except ImportError as error:
-            raise ModelError(f"--output {path}: {error}") from None
-    elif path.suffix == ".csv":
-        trajectory.to_csv(path)
-    else:
-        trajectory.to_npz(path)
-    print(f"wrote {path}")
+    reached = trajectory.t[-1] if len(trajectory.t) else 0.0
+    failure = "" if trajectory.success else (f"simulation failed: {_failure_hint(trajectory.message)}; "
+                                             f"the trajectory reaches t = {reached:g}")
+    _finish_run(trajectory, outputs, arguments, model, failure=failure, save=trajectory.to_npz,
+                rescue_name=f"{file_stem(model.system.name)}-trajectory.npz")
 
 
 def _inverse(arguments: argparse.Namespace) -> None:
     model = resolve_model(arguments.model)
-    output = _output_path(arguments.output, _INVERSE_SUFFIXES, "--output")
+    outputs = _requested_outputs(_INVERSE_OUTPUTS, arguments, model)
     drives = dict(parse_drive(text, model) for text in arguments.drive) if arguments.drive else model.drives
     if not drives:
         raise ModelError("no drives: give --drive COORDINATE=EXPRESSION or [[drives]] in the model file")
     t_end = model.simulation.t_end if arguments.t_end is None else arguments.t_end
-    run = inverse_dynamics_along(model, drives, np.linspace(0.0, t_end, arguments.points))
+    run = inverse_dynamics_along(model, drives, _output_grid(t_end, arguments, 101))
     print(run.report())
-    if not run.success:
-        saved = output or Path(f"{file_stem(model.system.name)}-inverse-partial.csv")
-        run.save(saved)
-        raise NumericalFailure(f"inverse dynamics failed {run.message}; the results before are saved in {saved}")
-    if output:
-        run.save(output)
-        print(f"wrote {output}")
+    failure = "" if run.success else f"inverse dynamics failed {run.message}"
+    _finish_run(run, outputs, arguments, model, failure=failure, save=run.save,
+                rescue_name=f"{file_stem(model.system.name)}-inverse.csv")
 
 
 # -- parser ---------------------------------------------------------------------------
@@ -185,6 +326,13 @@ def _count(text: str) -> int:
     if not text.isdigit() or int(text) < 2:
         raise argparse.ArgumentTypeError(f"expected an integer of at least 2, got {text!r}")
     return int(text)
+
+
+def _add_grid_options(sub: argparse.ArgumentParser, default: str) -> None:
+    """``--dt`` or ``--points``: the output times."""
+    grid = sub.add_mutually_exclusive_group()
+    grid.add_argument("--dt", type=_positive, metavar="STEP", help="output every STEP of time")
+    grid.add_argument("--points", type=_count, metavar="N", help=f"N evenly spaced output times (default: {default})")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -220,17 +368,29 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_argument("--method", help="integration method: auto, baumgarte, projection, ggl, compiled")
     sub.add_argument("--rtol", type=_positive, help="relative tolerance")
     sub.add_argument("--atol", type=_positive, help="absolute tolerance")
+    sub.add_argument("--max-steps", type=_count, metavar="N", help="stop after N integrator steps "
+                     "(default: kronlag.simulate's, which grows with the time span)")
+    _add_grid_options(sub, f"a point every {_GRID_SPACING:g} of time, at least {_GRID_POINTS[0]} and at most "
+                           f"{_GRID_POINTS[1]} points")
     sub.add_argument("--output", metavar="FILE", help="save the trajectory (.csv, .npz or .parquet)")
-    sub.add_argument("--plot", metavar="FILE", help="save a figure of the time histories (.png, .pdf, .svg)")
+    sub.add_argument("--plot", metavar="FILE", help="save a figure of the time histories (.png, .pdf, .svg, .jpg)")
     sub.add_argument("--animate", metavar="FILE", help="save an animation (.gif, .mp4 or .html)")
+    sub.add_argument("--fps", type=_positive, default=25.0,
+                     help="animation frames per second (default: 25; a GIF plays at most 50)")
+    pace = sub.add_mutually_exclusive_group()
+    pace.add_argument("--speed", type=_positive, help="simulated seconds per second of animation (default: 1, real "
+                                                      "time; 0.1 shows a fast mechanism ten times slower)")
+    pace.add_argument("--duration", type=_positive, metavar="SECONDS", help="playing time of the animation")
 
     sub = command("inverse", _inverse, "actuator forces and multipliers along a prescribed motion")
     sub.add_argument("--drive", action="append", metavar="Q=EXPR",
                      help="prescribed motion of a coordinate as an expression of t, e.g. 'q1=2*pi*t' "
                           "(repeat for several; default: the model's [[drives]])")
     sub.add_argument("--t-end", type=_positive, help="final time (default: the model's [simulation] t_end)")
-    sub.add_argument("--points", type=_count, default=101, help="number of evenly spaced times (default: 101)")
+    _add_grid_options(sub, "101")
     sub.add_argument("--output", metavar="FILE", help="save the results (.csv or .npz)")
+    sub.add_argument("--plot", metavar="FILE",
+                     help="save a figure of the forces and multipliers (.png, .pdf, .svg, .jpg)")
     return parser
 
 
@@ -251,12 +411,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(exit_request.code or 0)
     try:
         arguments.handler(arguments)
-    except NumericalFailure as error:
+    except IncompleteRun as error:
         print(f"kronlag: {error}", file=sys.stderr)
-        return EXIT_NUMERICAL
+        return EXIT_INCOMPLETE
     except _numerical_errors() as error:
         print(f"kronlag: numerical failure: {error}", file=sys.stderr)
-        return EXIT_NUMERICAL
+        return EXIT_INCOMPLETE
     except BrokenPipeError:  # the reader of standard output quit early (| head)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK

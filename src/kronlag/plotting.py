@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from os import PathLike
 from typing import TYPE_CHECKING
 
@@ -24,8 +24,9 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from .trajectory import Trajectory
+    from .workflows import InverseDynamicsRun
 
-__all__ = ["plot_trajectory"]
+__all__ = ["plot_trajectory", "plot_inverse_dynamics"]
 
 _PANEL_HEIGHT = 2.8  # inches per row of panels
 _FIGURE_WIDTH = 12.0
@@ -92,36 +93,50 @@ def _plot_series(axes: Axes, time: np.ndarray, values: np.ndarray, labels: Seque
                 ncols=1 + (len(labels) - 1) // 8)
 
 
-def _coordinates_panel(axes: Axes, traj: Trajectory) -> None:
-    _plot_series(axes, traj.t, traj.q, [_math_label(name) for name in traj.coordinate_names],
+def _with_unit(label: str, unit: str | None) -> str:
+    """``label (unit)``, or ``label`` when the unit is not known."""
+    return f"{label} ({unit})" if unit else label
+
+
+def _rate_unit(unit: str | None, units: Mapping[str, str]) -> str | None:
+    """The unit of a time derivative, ``unit/s``, when both units are known."""
+    return f"{unit}/{units['t']}" if unit and "t" in units else None
+
+
+def _coordinates_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
+    _plot_series(axes, traj.t, traj.q,
+                 [_with_unit(_math_label(name), units.get(name)) for name in traj.coordinate_names],
                  title="Coordinates", ylabel="$q$")
 
 
-def _velocities_panel(axes: Axes, traj: Trajectory) -> None:
-    _plot_series(axes, traj.t, traj.qd, [_math_label(name, dotted=True) for name in traj.coordinate_names],
+def _velocities_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
+    _plot_series(axes, traj.t, traj.qd,
+                 [_with_unit(_math_label(name, dotted=True), _rate_unit(units.get(name), units))
+                  for name in traj.coordinate_names],
                  title="Velocities", ylabel=r"$\dot{q}$")
 
 
-def _multipliers_panel(axes: Axes, traj: Trajectory) -> None:
+def _multipliers_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
     labels = ([_math_label(f"lambda{j + 1}") for j in range(traj.lam.shape[1])]
               + [_math_label(f"mu{k + 1}") for k in range(traj.mu.shape[1])])
     _plot_series(axes, traj.t, np.hstack([traj.lam, traj.mu]), labels,
                  title="Lagrange multipliers", ylabel=r"$\lambda,\ \mu$")
 
 
-def _energy_panel(axes: Axes, traj: Trajectory) -> None:
+def _energy_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
     kinetic, potential = traj.kinetic_energy, traj.potential_energy
     _plot_series(axes, traj.t, np.column_stack([kinetic, potential, kinetic + potential]),
-                 ["kinetic $T$", r"potential $\Pi$", r"total $E = T + \Pi$"], title="Energy", ylabel="energy")
+                 ["kinetic $T$", r"potential $\Pi$", r"total $E = T + \Pi$"], title="Energy",
+                 ylabel=_with_unit("energy", units.get("energy")))
 
 
-def _energy_drift_panel(axes: Axes, traj: Trajectory) -> None:
+def _energy_drift_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
     total = traj.kinetic_energy + traj.potential_energy
     _plot_series(axes, traj.t, (total - total[0])[:, None], ["$E(t) - E(t_0)$"],
-                 title="Total-energy drift", ylabel=r"$\Delta E$")
+                 title="Total-energy drift", ylabel=_with_unit(r"$\Delta E$", units.get("energy")))
 
 
-def _constraint_drift_panel(axes: Axes, traj: Trajectory) -> None:
+def _constraint_drift_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
     series = {r"position $\|\Phi(q)\|$": traj.position_residual,
               r"velocity $\|\Phi_q \dot{q}\|$" if traj.mu.shape[1] == 0 else
               r"velocity $\|[\Phi_q \dot{q};\ A \dot{q} + b]\|$": traj.velocity_residual}
@@ -145,7 +160,7 @@ def _constraint_drift_panel(axes: Axes, traj: Trajectory) -> None:
                   va="center", color="0.4")
 
 
-def _panels(traj: Trajectory) -> list[Callable[[Axes, Trajectory], None]]:
+def _panels(traj: Trajectory) -> list[Callable[[Axes, Trajectory, Mapping[str, str]], None]]:
     """The panels to draw: multipliers and constraint drift only for a constrained model."""
     constrained = traj.lam.shape[1] + traj.mu.shape[1] > 0
     panels = [_coordinates_panel, _velocities_panel]
@@ -162,7 +177,8 @@ def _title(traj: Trajectory) -> str:
     return title
 
 
-def plot_trajectory(traj: Trajectory, *, path: str | PathLike | None = None, show: bool = False) -> Figure:
+def plot_trajectory(traj: Trajectory, *, path: str | PathLike | None = None, show: bool = False,
+                    units: Mapping[str, str] | None = None) -> Figure:
     """Plot the time histories of a trajectory in one figure.
 
     Panels (sharing the time axis): coordinates ``q``; velocities ``qd``;
@@ -183,22 +199,65 @@ def plot_trajectory(traj: Trajectory, *, path: str | PathLike | None = None, sho
     show : bool
         Display the figure with ``matplotlib.pyplot.show()`` (on a machine
         without a display the Agg backend is used and nothing opens).
+    units : mapping of str to str, optional
+        Units by coordinate name, ``"t"`` (time) and ``"energy"``, as
+        :func:`kronlag.workflows.model_units` finds them in a model file;
+        quantities without a unit are labelled without one.
 
     Returns
     -------
     matplotlib.figure.Figure
     """
+    units = dict(units or {})
     panels = _panels(traj)
     rows = len(panels) // 2
     figure = _new_figure(show=show, figsize=(_FIGURE_WIDTH, 0.6 + _PANEL_HEIGHT * rows), layout="constrained")
     grid = figure.subplots(rows, 2, sharex=True, squeeze=False)
     for axes, panel in zip(grid.flat, panels):
-        panel(axes, traj)
+        panel(axes, traj, units)
+    return _finish(figure, grid, title=_title(traj), failed=traj.status != 0, units=units, path=path, show=show)
+
+
+def _finish(figure: Figure, grid: np.ndarray, *, title: str, failed: bool, units: Mapping[str, str],
+            path: str | PathLike | None, show: bool) -> Figure:
+    """Label the time axes and the figure (red if the run failed); save and show it as asked."""
     for axes in grid[-1]:
-        axes.set_xlabel("time $t$")
-    figure.suptitle(_title(traj), color="black" if traj.status == 0 else "tab:red")
+        axes.set_xlabel(_with_unit("time $t$", units.get("t")))
+    figure.suptitle(title, color="tab:red" if failed else "black")
     if path is not None:
         figure.savefig(path)
     if show:
         _pyplot().show()
     return figure
+
+
+def plot_inverse_dynamics(run: InverseDynamicsRun, *, path: str | PathLike | None = None, show: bool = False,
+                          units: Mapping[str, str] | None = None) -> Figure:
+    """Plot the result of :func:`kronlag.workflows.inverse_dynamics_along`.
+
+    Panels: the prescribed coordinates ``q`` of the driven coordinates, the
+    generalized forces ``f_Q`` on them (the actuator forces or torques), and
+    the multipliers ``lambda`` / ``mu`` (if the model has constraints).
+    Force units are ``N*m`` on an angle and ``N`` on a length, when the
+    energy is in ``J``.  Options as for :func:`plot_trajectory`.
+    """
+    units = dict(units or {})
+    driven = [run.coordinate_names.index(name) for name in run.actuated]
+    force_units = {"rad": "N*m", "m": "N"} if units.get("energy") == "J" else {}
+    series = [("Driven coordinates", "$q$", run.q[:, driven],
+               [_with_unit(_math_label(name), units.get(name)) for name in run.actuated]),
+              ("Actuator forces", "generalized force", run.forces,
+               [_with_unit(f"on {_math_label(name)}", force_units.get(units.get(name, ""))) for name in run.actuated])]
+    if run.lam.shape[1] + run.mu.shape[1]:
+        series.append(("Lagrange multipliers", r"$\lambda,\ \mu$", np.hstack([run.lam, run.mu]),
+                       [_math_label(f"lambda{j + 1}") for j in range(run.lam.shape[1])]
+                       + [_math_label(f"mu{k + 1}") for k in range(run.mu.shape[1])]))
+    figure = _new_figure(show=show, figsize=(_FIGURE_WIDTH / 2 + 1.5, 0.6 + _PANEL_HEIGHT * len(series)),
+                         layout="constrained")
+    grid = figure.subplots(len(series), 1, sharex=True, squeeze=False)
+    for axes, (title, ylabel, values, labels) in zip(grid.flat, series):
+        _plot_series(axes, run.t, values, labels, title=title, ylabel=ylabel)
+    title = f"inverse dynamics: {', '.join(run.actuated)} prescribed, {len(run.t)} samples"
+    if not run.success:
+        title += f"\nFAILED {run.message}"
+    return _finish(figure, grid, title=title, failed=not run.success, units=units, path=path, show=show)

@@ -9,6 +9,7 @@ and :func:`inverse_dynamics_along` use the numeric layer
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +35,7 @@ __all__ = [
     "numeric_model",
     "initial_state",
     "simulate_model",
+    "model_units",
     "SimulationSummary",
     "summarize",
     "parse_drive",
@@ -144,21 +146,67 @@ def initial_state(model: ModelFile, numeric: NumericModel) -> tuple[np.ndarray, 
 
 
 def simulate_model(model: ModelFile, *, t_end: float | None = None, method: str | None = None,
-                   rtol: float | None = None, atol: float | None = None,
-                   progress: Callable[[float], object] | None = None) -> Trajectory:
+                   rtol: float | None = None, atol: float | None = None, t_eval: np.ndarray | None = None,
+                   max_steps: int | None = None, progress: Callable[[float], object] | None = None) -> Trajectory:
     """Assemble the initial state and simulate from 0 to ``t_end``.
 
-    Options left at ``None`` come from the file's ``[simulation]`` table;
-    ``progress`` is called with the time after every step.
+    Options left at ``None`` come from the file's ``[simulation]`` table
+    (``max_steps``: :func:`kronlag.simulate`'s default); ``t_eval`` are the
+    output times (default: every step); ``progress`` is called with the time
+    after every step.
     """
     from .simulation import simulate
 
     numeric = numeric_model(model)
     q0, qd0 = initial_state(model, numeric)
     settings = model.simulation
+    limits = {} if max_steps is None else {"max_steps": max_steps}
     return simulate(numeric, (0.0, settings.t_end if t_end is None else t_end), q0, qd0,
                     method=method or settings.method, rtol=rtol or settings.rtol, atol=atol or settings.atol,
-                    progress=progress)
+                    t_eval=t_eval, progress=progress, **limits)
+
+
+_TRIGONOMETRIC = (sp.sin, sp.cos, sp.tan)
+
+
+def model_units(model: ModelFile) -> dict[str, str]:
+    """Units the model file determines, by name: coordinates, ``"t"`` (time) and ``"energy"``.
+
+    Only what follows from the file is given; a quantity whose unit cannot be
+    told is left out.  Coordinates: ``rad`` for one that is the argument of
+    a sine, cosine or tangent, or a planar body's angle; the length unit for
+    one that enters a position (of a body, drawing or traced point) with a
+    constant nonzero factor, where the length unit is the one unit of the
+    parameters appearing in those positions.  Time: ``s`` when some
+    parameter's unit is written with ``s``.  Energy: ``J`` when mass, length
+    and time are ``kg``, ``m`` and ``s``.
+    """
+    system = model.system
+    coordinates = set(system.coordinates)
+    positions = [entry for body in system.bodies for entry in body.position]
+    positions += [entry for line in system.drawing + system.traces for point in line.points for entry in point]
+    angle_expressions = positions + [getattr(body, "angle", sp.S.Zero) for body in system.bodies]
+    angle_expressions += [entry for body in system.bodies for entry in getattr(body, "rotation", ())]
+    angles = {body.angle for body in system.bodies if getattr(body, "angle", None) in coordinates}
+    angles |= {symbol for expression in angle_expressions for function in expression.atoms(*_TRIGONOMETRIC)
+               for symbol in function.args[0].free_symbols & coordinates}
+
+    def units_of(expressions: list[sp.Expr]) -> set[str | None]:
+        return {model.units.get(p.name) for e in expressions for p in e.free_symbols - coordinates}
+
+    length_units = units_of(positions)
+    length = length_units.pop() if len(length_units) == 1 else None
+    lengths = {q for q in coordinates for entry in positions if (factor := sp.diff(entry, q)).is_number
+               and factor != 0}
+    units = {q.name: "rad" for q in angles - lengths}
+    if length:
+        units |= {q.name: length for q in lengths - angles}
+    if any(re.search(r"(?<![A-Za-z])s(?![A-Za-z])", unit) for unit in model.units.values()):
+        units["t"] = "s"
+    masses = units_of([body.mass for body in system.bodies])
+    if masses == {"kg"} and length == "m" and units.get("t") == "s":
+        units["energy"] = "J"
+    return units
 
 
 @dataclass(frozen=True)
