@@ -7,6 +7,7 @@ Kronecker-product matrix form of Lagrange's equations with multipliers
 """
 
 from . import calculus, models
+from .analysis import Equilibrium, EquilibriumError, LinearModel
 from .derivation import derive
 from .equations import Equations
 from .modelfile import load_model
@@ -61,4 +62,7 @@ __all__ = [
     "RedundantConstraintsWarning",
     "simulate",
     "Trajectory",
+    "Equilibrium",
+    "EquilibriumError",
+    "LinearModel",
 ]

@@ -231,16 +231,21 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_argument("--t-end", type=_positive, help="final time (default: the model's [simulation] t_end)")
     sub.add_argument("--points", type=_count, default=101, help="number of evenly spaced times (default: 101)")
     sub.add_argument("--output", metavar="FILE", help="save the results (.csv or .npz)")
+
+    from .cli_analysis import add_commands as add_analysis_commands
+
+    add_analysis_commands(command)
     return parser
 
 
 def _numerical_errors() -> tuple[type[Exception], ...]:
     """The numeric layer's failure exceptions (none if it is not installed)."""
     try:
+        from .analysis import EquilibriumError
         from .numeric import AssemblyError, SingularConfigurationError
     except ImportError:
         return ()
-    return AssemblyError, SingularConfigurationError
+    return AssemblyError, SingularConfigurationError, EquilibriumError
 
 
 def main(argv: Sequence[str] | None = None) -> int:

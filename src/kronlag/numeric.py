@@ -578,3 +578,17 @@ class NumericModel:
     def __repr__(self) -> str:
         return (f"NumericModel({self.equations.system.name!r}, m={self.m}, r={self.r}, s={self.s}, "
                 f"backend={self.backend!r})")
+
+    # -- static equilibrium and linearization (kronlag.analysis) --------------------------------
+
+    def equilibrium(self, q_guess, *, fixed: Mapping | None = None, **options):
+        """Static equilibrium near ``q_guess``; see :func:`kronlag.analysis.equilibrium`."""
+        from .analysis import equilibrium
+
+        return equilibrium(self, q_guess, fixed=fixed, **options)
+
+    def linearize(self, q, qd=None, *, t: float = 0.0, **options):
+        """Linearized motion about ``(q, qd)``; see :func:`kronlag.analysis.linearize`."""
+        from .analysis import linearize
+
+        return linearize(self, q, qd, t=t, **options)
