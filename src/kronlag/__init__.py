@@ -20,6 +20,7 @@ from .numeric import (
     SingularConfigurationError,
 )
 from .simulation import simulate
+from .sweeps import SweepResult, sweep
 from .trajectory import Trajectory
 from .system import (
     Damper,
@@ -65,4 +66,6 @@ __all__ = [
     "Equilibrium",
     "EquilibriumError",
     "LinearModel",
+    "sweep",
+    "SweepResult",
 ]

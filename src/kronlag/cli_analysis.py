@@ -1,10 +1,12 @@
-"""The analysis commands of the ``kronlag`` command line (``equilibrium``), registered by
-:func:`kronlag.cli.build_parser`; thin shells over :mod:`kronlag.analysis`."""
+"""The analysis commands of the ``kronlag`` command line (``equilibrium``, ``sweep``), registered
+by :func:`kronlag.cli.build_parser`; thin shells over :mod:`kronlag.analysis` and :mod:`kronlag.sweep`."""
 
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -58,6 +60,54 @@ def _equilibrium(arguments: argparse.Namespace) -> None:
             print(f"  mode {k}: {frequency:.8g} rad/s = {frequency / (2 * np.pi):.6g} Hz   shape ({shape})")
 
 
+def _axis(text: str) -> tuple[str, np.ndarray]:
+    """``"m2=1:3:5"`` -> ``("m2", linspace(1, 3, 5))``; ``"m2=1,2.5"`` -> the listed values."""
+    name, separator, values = text.partition("=")
+    try:
+        if not separator or not name.strip():
+            raise ValueError
+        if ":" in values:
+            start, stop, count = values.split(":")
+            if int(count) < 1:
+                raise ValueError
+            return name.strip(), np.linspace(float(start), float(stop), int(count))
+        return name.strip(), np.array([float(value) for value in values.split(",")])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected NAME=START:STOP:COUNT or NAME=V1,V2,..., got {text!r}") from None
+
+
+def _sweep(arguments: argparse.Namespace) -> None:
+    from .cli import NumericalFailure
+    from .sweeps import sweep
+
+    if arguments.output and Path(arguments.output).suffix not in (".csv", ".parquet"):
+        raise ModelError(f"--output {arguments.output}: the file name must end in .csv or .parquet")
+    model = resolve_model(arguments.model)
+    numeric = numeric_model(model)
+    t_end = arguments.t_end if arguments.t_end is not None else model.simulation.t_end
+    options = {"method": arguments.method or model.simulation.method, "rtol": model.simulation.rtol,
+               "atol": model.simulation.atol, "t_eval": np.linspace(0.0, t_end, arguments.points)}
+    result = sweep(numeric, parameters=dict(arguments.grid), initial_states=model.guess_vectors(),
+                   fixed=model.fixed, qd_fixed=model.qd_fixed, t_span=(0.0, t_end), workers=arguments.workers,
+                   progress=True, **options)
+    table = result.table
+    print(f"{len(table)} cases, {int((table['status'] == 'ok').sum())} ok, "
+          f"{len(result.failed)} not; median wall time per case {table['wall_time'].median():.3g} s")
+    print(table.drop(columns=["message"]).to_string(max_rows=20, float_format=lambda x: f"{x:.6g}"))
+    if arguments.output:
+        path = Path(arguments.output)
+        if path.suffix == ".csv":
+            table.to_csv(path, index=False)
+        else:
+            table.to_parquet(path)
+        print(f"wrote {path}")
+    if len(result.failed):
+        for row in result.failed.itertuples():
+            print(f"case {row.case}: {row.status}: {row.message}", file=sys.stderr)
+        raise NumericalFailure(f"{len(result.failed)} of {len(table)} cases did not succeed"
+                               + (f"; all results are saved in {arguments.output}" if arguments.output else ""))
+
+
 def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
     """Register the analysis commands with ``command(name, handler, summary)`` of the main parser."""
     sub = command("equilibrium", _equilibrium, "static equilibrium: g - f_Q + Phi_q^T lambda = 0, Phi = 0")
@@ -67,3 +117,14 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
                      help="hold a coordinate at a value (a drive held); repeatable")
     sub.add_argument("--modes", action="store_true",
                      help="also linearize there and print the natural frequencies and mode shapes")
+
+    sub = command("sweep", _sweep, "simulate a grid of parameter values and initial coordinates/speeds (Dask)")
+    sub.add_argument("--grid", action="append", type=_axis, required=True, metavar="NAME=START:STOP:COUNT",
+                     help="values of a parameter, coordinate (q1) or speed (q1d): evenly spaced, or "
+                          "NAME=V1,V2,...; repeat for a grid of all combinations")
+    sub.add_argument("--t-end", type=float, help="final time (default: the model's [simulation] t_end)")
+    sub.add_argument("--method", help="integration method (default: the model's)")
+    sub.add_argument("--points", type=int, default=101, help="output times per case (default: 101)")
+    sub.add_argument("--workers", type=int, default=2,
+                     help="processes of the local Dask cluster; 0: run in this process (default: 2)")
+    sub.add_argument("--output", metavar="FILE", help="save the table of outcomes (.csv or .parquet)")
