@@ -96,3 +96,21 @@ def test_unknown_actuated_coordinate_is_named():
     pytest.importorskip("jax")
     with pytest.raises(ValueError, match="unknown actuated coordinate.*'q9'"):
         jax_functions(derived("four_bar"), actuated=["q9"])
+
+
+@pytest.mark.slow
+def test_optimal_control_example_swings_the_crank_to_its_target(tmp_path, monkeypatch, capsys):
+    """The torque IPOPT finds, replayed through kronlag.simulate, lands the crank on the target."""
+    pytest.importorskip("casadi")
+    import runpy
+    from pathlib import Path
+
+    monkeypatch.chdir(tmp_path)
+    script = Path(__file__).parents[1] / "examples" / "optimal_control" / "four_bar_min_effort.py"
+    namespace = runpy.run_path(str(script), run_name="__main__")
+    assert (tmp_path / "four_bar_min_effort.png").stat().st_size > 10_000
+    replay, rest = namespace["replay"], namespace["rest"]
+    assert replay.success
+    assert replay.q[-1, 0] == pytest.approx(rest.q[0] + namespace["SWING"], abs=1e-4)
+    assert abs(replay.qd[-1, 0]) < 1e-3
+    assert namespace["effort"] > 0
