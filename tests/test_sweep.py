@@ -104,3 +104,15 @@ def test_cli_sweep_writes_the_table_and_fails_on_failed_cases(tmp_path, capsys):
     assert main(["sweep", "four_bar", "--grid", "l2=0.6,0.05", "--t-end", "0.5", "--workers", "0"]) == 1
     assert "case 1: error: AssemblyError" in capsys.readouterr().err
     assert main(["sweep", "four_bar", "--grid", "m3=2:4"]) == 2
+
+
+def test_kept_trajectories_become_an_xarray_dataset(model):
+    pytest.importorskip("xarray")
+    result = sweep(model, parameters={"q1d": [1.0, 3.0]}, initial_states=([1.0, 0.5, 1.5], [0.0, 0, 0]),
+                   fixed=["q1"], t_span=(0.0, 1.0), workers=0, t_eval=T_EVAL, keep_trajectories=True)
+    dataset = result.to_xarray()
+    assert dataset["q"].shape == (2, len(T_EVAL), 3)
+    assert list(dataset["coordinate"].values) == ["q1", "q2", "q3"]
+    np.testing.assert_allclose(dataset["q"].sel(case=1).values, result.trajectories[1].q)
+    np.testing.assert_allclose(dataset["qd"].sel(case=0, coordinate="q1").values[0], 1.0)
+    assert list(dataset["q1d"].values) == [1.0, 3.0]
