@@ -234,3 +234,39 @@ def test_cli_equilibrium_prints_the_hanging_state_and_its_frequency(capsys):
     assert float(mode.split()[2]) == pytest.approx(np.sqrt(stiffness / inertia), rel=1e-6)
     assert main(["equilibrium", "four_bar", "--fix", "q9=1"]) == 2
     assert "unknown coordinate(s) q9" in capsys.readouterr().err
+
+
+def test_symbolic_linearization_of_a_cartesian_pendulum_matches_the_hand_reduction():
+    """One mass on a rod, coordinates x, y, x independent: y = -sqrt(l^2 - x^2) below the pivot,
+    so M_r = m (1 + x^2 / y^2) and, at rest (x = 0, lambda = m g / (2 l)), K_r = m g / l."""
+    from kronlag.analysis import symbolic_linearization
+
+    x, y = kronlag.coordinates("x y")
+    m, l, g = sp.symbols("m l g", positive=True)
+    system = kronlag.System([x, y], parameters=[m, l, g], gravity=(0, -g), name="cartesian_pendulum")
+    system.add_body(kronlag.PointMass("bob", mass=m, position=(x, y)))
+    system.add_constraint(x ** 2 + y ** 2 - l ** 2, name="rod")
+    equations = kronlag.derive(system)
+    reduced = symbolic_linearization(equations, ["x"])
+    assert sp.simplify(reduced["M_r"][0, 0] - m * (1 + x ** 2 / y ** 2)) == 0
+    (lam,) = equations.lambdas
+    at_rest = {x: 0, y: -l, lam: m * g / (2 * l), **dict.fromkeys(equations.speeds, 0),
+               **dict.fromkeys(equations.accelerations, 0)}
+    assert sp.simplify(reduced["K_r"].subs(at_rest)[0, 0] - m * g / l) == 0
+    assert sp.simplify(reduced["D_r"].subs(at_rest)[0, 0]) == 0
+
+
+def test_symbolic_linearization_of_the_four_bar_agrees_with_the_numeric_one(four_bar):
+    from kronlag.analysis import symbolic_linearization
+
+    equations = four_bar.equations
+    reduced = symbolic_linearization(equations, ["q1"])
+    rest = four_bar.equilibrium([-1.5, -0.5, -1.5])
+    linear = four_bar.linearize(rest.q, independent=["q1"])
+    point = {**dict(zip(equations.coordinates, rest.q)), **dict(zip(equations.lambdas, rest.lam)),
+             **dict.fromkeys(equations.speeds, 0), **dict.fromkeys(equations.accelerations, 0),
+             **{p: four_bar.parameter_values()[p.name] for p in equations.parameters}}
+    assert float(reduced["M_r"].subs(point)[0, 0]) == pytest.approx(linear.mass[0, 0], rel=1e-10)
+    assert float(reduced["K_r"].subs(point)[0, 0]) == pytest.approx(linear.stiffness[0, 0], rel=1e-9)
+    with pytest.raises(ValueError, match="expected 1 distinct names"):
+        symbolic_linearization(equations, ["q1", "q2"])

@@ -55,7 +55,8 @@ if TYPE_CHECKING:
     from .equations import Equations
     from .numeric import NumericModel
 
-__all__ = ["EquilibriumError", "Equilibrium", "LinearModel", "equilibrium", "linearize", "tangent_matrices"]
+__all__ = ["EquilibriumError", "Equilibrium", "LinearModel", "equilibrium", "linearize", "tangent_matrices",
+           "symbolic_linearization"]
 
 
 class EquilibriumError(RuntimeError):
@@ -484,10 +485,8 @@ def linearize(model: NumericModel, q, qd=None, *, t: float = 0.0, independent: S
 
     M, K, H_qd = evaluate("M"), evaluate("K"), evaluate("H_qd")
     gamma_q, gamma_qd, V, W = (evaluate(name) for name in ("gamma_q", "gamma_qd", "V", "W"))
+    mass, damping, stiffness = _reduced(R, solve, M, K, H_qd, gamma_q, gamma_qd, V, W)
     velocity_offset = solve @ V  # dqd = R dzd - velocity_offset dq
-    mass = R.T @ M @ R
-    damping = R.T @ (H_qd + M @ solve @ gamma_qd) @ R
-    stiffness = R.T @ (K + M @ solve @ (gamma_q - gamma_qd @ velocity_offset - W) - H_qd @ velocity_offset) @ R
     input_forces = _input_directions(model, functions("f_Q_p", t, q, qd, qdd, lam, p), inputs)
     inverse_mass = np.linalg.inv(mass)
     A = np.block([[np.zeros((n, n)), np.eye(n)], [-inverse_mass @ stiffness, -inverse_mass @ damping]])
@@ -496,6 +495,56 @@ def linearize(model: NumericModel, q, qd=None, *, t: float = 0.0, independent: S
     C = _output_rows(model, R, velocity_offset @ R, output_names)
     return LinearModel(A, B, C, np.zeros((len(output_names), len(inputs))), tuple(names[i] for i in chosen),
                        tuple(inputs), output_names, mass, damping, stiffness, R, q, qd, lam, t, model)
+
+
+def _reduced(R, solve, M, K, H_qd, gamma_q, gamma_qd, V, W):
+    """``(M_r, D_r, K_r)`` of the module docstring (NumPy arrays or SymPy matrices alike)."""
+    velocity_offset = solve @ V
+    mass = R.T @ M @ R
+    damping = R.T @ (H_qd + M @ solve @ gamma_qd) @ R
+    stiffness = R.T @ (K + M @ solve @ (gamma_q - gamma_qd @ velocity_offset - W) - H_qd @ velocity_offset) @ R
+    return mass, damping, stiffness
+
+
+def symbolic_linearization(equations: Equations, independent: Sequence) -> dict[str, sp.Matrix]:
+    """``M_r``, ``D_r``, ``K_r`` (n, n) and ``R`` (m, n) as SymPy matrices, for the independent
+    coordinates ``independent`` (names), by the formulas of the module docstring.
+
+    The entries are expressions of ``q``, ``qd``, ``qdd`` (``equations.accelerations``),
+    ``lambda`` (``equations.lambdas``), the parameters and ``t``: substitute an operating point
+    (at an equilibrium ``qd = qdd = 0``).  The dependent coordinates are solved with the
+    symbolic inverse of their ``Phi_q`` columns (r of them: the constraints must be independent),
+    so the expressions grow quickly with r; :func:`linearize` is the numeric route.
+    """
+    eq = equations
+    m, r, s = eq.shape
+    if s:
+        raise NotImplementedError(f"{eq.system.name}: linearization supports holonomic constraints only")
+    names = [q.name for q in eq.coordinates]
+    unknown = [name for name in independent if name not in names]
+    if unknown or len(set(independent)) != m - r:
+        raise ValueError(f"independent coordinates {list(independent)}: expected {m - r} distinct names "
+                         f"among {', '.join(names)}")
+    chosen = [names.index(name) for name in independent]
+    dependent = [i for i in range(m) if i not in chosen]
+    selection = sp.zeros(m, m - r)
+    for column, i in enumerate(chosen):
+        selection[i, column] = 1
+    solve = sp.zeros(m, r)
+    if r:
+        block = eq.Phi_q[:, dependent]
+        if block.det() == 0:
+            raise ValueError(f"the Phi_q columns of {[names[i] for i in dependent]} are singular: "
+                             "choose other independent coordinates")
+        inverse = block.inv()
+        for row, i in enumerate(dependent):
+            solve[i, :] = inverse[row, :]
+    R = (sp.eye(m) - solve * eq.Phi_q) * selection
+    tangent = tangent_matrices(eq)
+    matrices = [sp.Matrix(x) for x in (eq.M, tangent["K"], tangent["H_qd"], tangent["gamma_q"],
+                                       tangent["gamma_qd"], tangent["V"], tangent["W"])]
+    mass, damping, stiffness = _reduced(R, solve, *matrices)
+    return {"M_r": mass, "D_r": damping, "K_r": stiffness, "R": R}
 
 
 def _input_directions(model: NumericModel, f_Q_p: np.ndarray, inputs: Sequence[str]) -> np.ndarray:
