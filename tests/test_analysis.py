@@ -270,3 +270,18 @@ def test_symbolic_linearization_of_the_four_bar_agrees_with_the_numeric_one(four
     assert float(reduced["K_r"].subs(point)[0, 0]) == pytest.approx(linear.stiffness[0, 0], rel=1e-9)
     with pytest.raises(ValueError, match="expected 1 distinct names"):
         symbolic_linearization(equations, ["q1", "q2"])
+
+
+def test_a_point_as_output_moves_with_the_closed_form_geometry(four_bar):
+    rest = four_bar.equilibrium([-1.5, -0.5, -1.5])
+    eq = four_bar.equations
+    q1, q3 = eq.coordinates[0], eq.coordinates[2]
+    l3, l4 = (p for p in eq.parameters if p.name in ("l3", "l4"))
+    pin_x = l4 + l3 * sp.cos(q3)  # x of the joint C
+    linear = four_bar.linearize(rest.q, independent=["q1"], outputs=[pin_x, "q1"])
+    geometry = [loop_geometry(rest.q[0] + h) for h in (-1e-6, 1e-6)]
+    pin = [FOUR_BAR["l4"] + FOUR_BAR["l3"] * np.cos(g["angles"][2]) for g in geometry]
+    assert linear.C[0, 0] == pytest.approx((pin[1] - pin[0]) / 2e-6, rel=1e-6)
+    assert linear.outputs == (str(pin_x), "q1")
+    with pytest.raises(ValueError, match="only coordinates and parameters"):
+        four_bar.linearize(rest.q, outputs=[q1 * eq.speeds[0]])

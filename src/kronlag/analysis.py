@@ -437,9 +437,10 @@ def linearize(model: NumericModel, q, qd=None, *, t: float = 0.0, independent: S
     inputs : sequence of str
         Each a parameter name entering ``f_Q`` (e.g. a torque ``tau``; column
         ``d f_Q/d p``) or a coordinate name (a generalized force on it).
-    outputs : sequence of str
-        Each a coordinate name (``dq_i``) or a speed name (``q1d``: ``dqd_i``);
-        all m coordinates when empty.
+    outputs : sequence of str or SymPy expressions
+        Each a coordinate name (``dq_i``), a speed name (``q1d``: ``dqd_i``) or an
+        expression of the coordinates and parameters (a point's coordinate, say;
+        ``dy = (dy/dq) R dz``, named ``str(expression)``); all m coordinates when empty.
 
     Returns
     -------
@@ -491,8 +492,9 @@ def linearize(model: NumericModel, q, qd=None, *, t: float = 0.0, independent: S
     inverse_mass = np.linalg.inv(mass)
     A = np.block([[np.zeros((n, n)), np.eye(n)], [-inverse_mass @ stiffness, -inverse_mass @ damping]])
     B = np.vstack([np.zeros((n, len(inputs))), inverse_mass @ R.T @ input_forces])
-    output_names = tuple(outputs) or names
-    C = _output_rows(model, R, velocity_offset @ R, output_names)
+    outputs = tuple(outputs) or names
+    C = _output_rows(model, R, velocity_offset @ R, outputs, q, p)
+    output_names = tuple(str(output) for output in outputs)
     return LinearModel(A, B, C, np.zeros((len(output_names), len(inputs))), tuple(names[i] for i in chosen),
                        tuple(inputs), output_names, mass, damping, stiffness, R, q, qd, lam, t, model)
 
@@ -562,19 +564,30 @@ def _input_directions(model: NumericModel, f_Q_p: np.ndarray, inputs: Sequence[s
     return np.column_stack(columns) if columns else np.zeros((model.m, 0))
 
 
-def _output_rows(model: NumericModel, R: np.ndarray, speed_from_position: np.ndarray,
-                 outputs: Sequence[str]) -> np.ndarray:
-    """``C`` (l, 2n): ``dq_i = R_i dz`` for a coordinate, ``dqd_i = R_i dzd - (P V R)_i dz`` for a speed."""
+def _output_rows(model: NumericModel, R: np.ndarray, speed_from_position: np.ndarray, outputs: Sequence,
+                 q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``C`` (l, 2n): ``dq_i = R_i dz`` for a coordinate, ``dqd_i = R_i dzd - (P V R)_i dz`` for a
+    speed, ``dy = (dy/dq) R dz`` for an expression ``y(q, p)`` (e.g. a coordinate of a point)."""
     index = model._coordinate_index
     speeds = {f"{name}d": i for name, i in index.items()}
+    eq = model.equations
     rows = []
-    for name in outputs:
-        if name in index:
-            rows.append(np.concatenate([R[index[name]], np.zeros(R.shape[1])]))
-        elif name in speeds:
-            i = speeds[name]
+    for output in outputs:
+        if isinstance(output, sp.Expr):
+            unknown = output.free_symbols - set(eq.coordinates) - set(eq.parameters)
+            if unknown:
+                raise ValueError(f"output {output}: only coordinates and parameters may appear, not "
+                                 f"{', '.join(sorted(map(str, unknown)))}")
+            gradient = sp.lambdify([list(eq.coordinates), list(eq.parameters)],
+                                   sp.Matrix([output]).jacobian(eq.coordinates), modules="numpy")
+            slope = np.array(gradient(q, p), dtype=float).reshape(model.m)
+            rows.append(np.concatenate([slope @ R, np.zeros(R.shape[1])]))
+        elif output in index:
+            rows.append(np.concatenate([R[index[output]], np.zeros(R.shape[1])]))
+        elif output in speeds:
+            i = speeds[output]
             rows.append(np.concatenate([-speed_from_position[i], R[i]]))
         else:
-            raise ValueError(f"unknown output {name!r}: expected a coordinate ({', '.join(index)}) "
-                             f"or a speed ({', '.join(speeds)})")
+            raise ValueError(f"unknown output {output!r}: expected a coordinate ({', '.join(index)}), "
+                             f"a speed ({', '.join(speeds)}) or a SymPy expression of the coordinates")
     return np.array(rows).reshape(len(rows), 2 * R.shape[1])
