@@ -57,7 +57,7 @@ def test_equations_pickle_with_and_without_the_christoffel_matrix(equations):
     assert restored.M == fresh.M and restored.Phi_q == fresh.Phi_q and restored.gamma == fresh.gamma
     difference = (restored.C_christoffel - equations.C_christoffel).applyfunc(sp.simplify)
     assert difference == sp.zeros(3, 3)
-    equations.C_christoffel  # computed: the matrix itself travels
+    assert equations.C_christoffel.shape == (3, 3)  # now computed: the matrix itself travels
     assert pickle.loads(pickle.dumps(equations)).C_christoffel == equations.C_christoffel
 
 

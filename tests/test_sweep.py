@@ -70,7 +70,7 @@ def test_local_cluster_loses_nothing_when_a_worker_is_killed_mid_sweep(model):
 
     def kill_a_worker(done: int, total: int) -> None:
         if done >= 3 and not killed:
-            address, pid = sorted(client.run(os.getpid).items())[0]
+            _, pid = min(client.run(os.getpid).items())
             os.kill(pid, signal.SIGKILL)  # a worker process of this test's own cluster
             killed.append(pid)
 

@@ -40,7 +40,7 @@ with the model's parameter values.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from typing import TYPE_CHECKING
@@ -50,6 +50,7 @@ import scipy.linalg
 import sympy as sp
 
 from . import codegen
+from .numeric import AssemblyError, _names
 
 if TYPE_CHECKING:
     from .equations import Equations
@@ -206,9 +207,7 @@ def equilibrium(model: NumericModel, q_guess, *, fixed: Mapping | None = None, t
     m, r = model.m, model.r
     try:
         q, _ = model.assemble(q_guess, fixed=fixed, t=t)
-    except Exception as error:  # AssemblyError, bad names/shapes: keep their message
-        if type(error).__name__ != "AssemblyError":
-            raise
+    except AssemblyError as error:
         raise EquilibriumError(f"no equilibrium: {error}", error.residual) from error
     held = sorted(model._held(fixed, q.copy()))
     free = [i for i in range(m) if i not in held]
@@ -462,8 +461,6 @@ def linearize(model: NumericModel, q, qd=None, *, t: float = 0.0, independent: S
     names = model.coordinate_names
     chosen, dependent = independent_coordinates(Phi_q, names)
     if independent is not None:
-        from .numeric import _names
-
         chosen = sorted(_names(list(independent), model._coordinate_index, "independent coordinate(s)"))
         dependent = [i for i in range(m) if i not in chosen]
         rank = np.linalg.matrix_rank(Phi_q) if r else 0

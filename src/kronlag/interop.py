@@ -39,6 +39,8 @@ from typing import TYPE_CHECKING, Any
 
 import sympy as sp
 
+from .numeric import _names
+
 if TYPE_CHECKING:
     from .equations import Equations
     from .numeric import NumericModel
@@ -55,7 +57,7 @@ _FUNCTION_NAMES = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh",
 
 def _namespace(module, renames: dict[str, str]) -> dict[str, Any]:
     names = {name: getattr(module, renames.get(name, name)) for name in _FUNCTION_NAMES}
-    names.update(Abs=getattr(module, renames.get("Abs", "abs")), sign=getattr(module, "sign"),
+    names.update(Abs=getattr(module, renames.get("Abs", "abs")), sign=module.sign,
                  ceiling=getattr(module, renames.get("ceiling", "ceil")), pi=math.pi, E=math.e)
     return names
 
@@ -155,8 +157,6 @@ def _equations_of(source: Equations | NumericModel) -> Equations:
 
 def _actuated_columns(equations: Equations, actuated: Sequence | None) -> list[int]:
     """Indices of the actuated coordinates (default: the first coordinate)."""
-    from .numeric import _names
-
     index = {q.name: i for i, q in enumerate(equations.coordinates)}
     return _names(list(actuated) if actuated is not None else [equations.coordinates[0].name], index,
                   "actuated coordinate(s)")
