@@ -251,14 +251,6 @@ class Equations:
             state["christoffel_source"] = partial(christoffel_matrix, self.M, self.coordinates, self.speeds)
         return state
 
-
-def christoffel_matrix(M: sp.MatrixBase, coordinates, speeds) -> sp.ImmutableMatrix:
-    """``C_ij = sum_k 1/2 (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i) qd_k`` (m, m) from ``M`` (m, m)."""
-    m = M.rows
-    derivatives = [M.diff(q) for q in coordinates]
-    return sp.ImmutableMatrix(m, m, lambda i, j: sum(
-        (derivatives[k][i, j] + derivatives[j][i, k] - derivatives[i][j, k]) * speeds[k] / 2 for k in range(m)))
-
     def __str__(self) -> str:
         blocks = [repr(self)]
         for name in MATRIX_NAMES:
@@ -266,3 +258,11 @@ def christoffel_matrix(M: sp.MatrixBase, coordinates, speeds) -> sp.ImmutableMat
             if matrix.rows:
                 blocks.append(f"{name} =\n{sp.pretty(matrix, use_unicode=False, wrap_line=False)}")
         return "\n\n".join(blocks)
+
+
+def christoffel_matrix(M: sp.MatrixBase, coordinates, speeds) -> sp.ImmutableMatrix:
+    """``C_ij = sum_k 1/2 (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i) qd_k`` (m, m) from ``M`` (m, m)."""
+    m = M.rows
+    derivatives = [M.diff(q) for q in coordinates]
+    return sp.ImmutableMatrix(m, m, lambda i, j: sum(
+        (derivatives[k][i, j] + derivatives[j][i, k] - derivatives[i][j, k]) * speeds[k] / 2 for k in range(m)))
