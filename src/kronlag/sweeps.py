@@ -240,7 +240,7 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
     model_or_factory : NumericModel or callable
         A built model (each case is ``model.with_parameters(case)``: no new code), or
         ``factory(case: dict) -> NumericModel`` for cases that change the equations.
-        Either is pickled (cloudpickle for a factory) and unpickled once per worker.
+        Either is pickled (cloudpickle) and unpickled once per worker.
     parameters : mapping name -> values, list of dicts, or pandas.DataFrame
         A mapping is a grid (every combination, :func:`grid`); a list or a frame gives
         the cases one by one.  A name is a parameter, a coordinate (``q1``: its
@@ -316,7 +316,7 @@ def _run_distributed(source, cases, settings, client, workers, batch_size, retri
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
         owned = client = Client(cluster)
     try:
-        payload = pickle.dumps(source) if isinstance(source, NumericModel) else cloudpickle.dumps(source)
+        payload = cloudpickle.dumps(source)  # carries lambdas: factories, time-varying parameters
         token = hashlib.sha256(payload).hexdigest()
         settings_payload = cloudpickle.dumps(settings)
         parallel = max(1, len(client.scheduler_info().get("workers", {})) or workers)
