@@ -285,3 +285,37 @@ def test_a_point_as_output_moves_with_the_closed_form_geometry(four_bar):
     assert linear.outputs == (str(pin_x), "q1")
     with pytest.raises(ValueError, match="only coordinates and parameters"):
         four_bar.linearize(rest.q, outputs=[q1 * eq.speeds[0]])
+
+
+def test_damping_ratio_of_a_damped_oscillator_on_an_inclined_line():
+    """A mass on the line y = x (coordinates x, y), a zero-length spring to the origin and viscous
+    damping in both directions: along the line m s'' + c s' + k s = 0."""
+    x, y = kronlag.coordinates("x y")
+    m, k, c = sp.symbols("m k c", positive=True)
+    system = kronlag.System([x, y], parameters=[m, k, c], name="inclined_oscillator")
+    system.add_body(kronlag.PointMass("slider", mass=m, position=(x, y)))
+    system.add_spring((x, y), (0, 0), stiffness=k)
+    system.add_generalized_force([-c * kronlag.speed_symbol(x), -c * kronlag.speed_symbol(y)], name="viscous")
+    system.add_constraint(y - x, name="line")
+    model = kronlag.derive(system).numeric(dict(m=2.0, k=50.0, c=3.0))
+    rest = model.equilibrium([0.1, 0.1])
+    np.testing.assert_allclose(rest.q, 0, atol=1e-12)
+    linear = model.linearize(rest.q)
+    omega, zeta = np.sqrt(50.0 / 2.0), 3.0 / (2 * np.sqrt(50.0 * 2.0))
+    np.testing.assert_allclose(linear.natural_frequencies, [omega], rtol=1e-12)
+    np.testing.assert_allclose(linear.damping_ratios, [zeta], rtol=1e-12)
+    expected_poles = -zeta * omega + np.array([-1j, 1j]) * omega * np.sqrt(1 - zeta ** 2)
+    np.testing.assert_allclose(np.sort_complex(linear.eigenvalues), np.sort_complex(expected_poles), rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_cli_animates_a_mode(tmp_path, capsys):
+    from kronlag.cli import main
+
+    hanging = ["--guess", "q1=-1.5", "--guess", "q2=-0.5", "--guess", "q3=-1.5"]
+    assert main(["equilibrium", "four_bar", *hanging, "--animate-mode", str(tmp_path / "mode.txt")]) == 2
+    assert "must end in .gif, .mp4 or .html" in capsys.readouterr().err
+    assert main(["equilibrium", "four_bar", *hanging, "--animate-mode", str(tmp_path / "mode.gif"), "--mode", "1"]) == 2
+    assert "--mode 1: the model has modes 0 to 0" in capsys.readouterr().err
+    assert main(["equilibrium", "four_bar", *hanging, "--animate-mode", str(tmp_path / "mode.gif")]) == 0
+    assert (tmp_path / "mode.gif").stat().st_size > 10_000

@@ -52,12 +52,18 @@ def _equilibrium(arguments: argparse.Namespace) -> None:
         print(f"  lambda{j + 1:<6} = {value: .10g}")
     for name, value in rest.holding_forces.items():
         print(f"  force holding {name} = {value: .10g}")
-    if arguments.modes:
+    if arguments.animate_mode and Path(arguments.animate_mode).suffix not in (".gif", ".mp4", ".html", ".htm"):
+        raise ModelError(f"--animate-mode {arguments.animate_mode}: the file name must end in .gif, .mp4 or .html")
+    if arguments.modes or arguments.animate_mode:
         linear = numeric.linearize(rest.q)
         print(f"linearized in {', '.join(linear.coordinates)}: natural frequencies (rad/s, nan: unstable)")
         for k, frequency in enumerate(linear.natural_frequencies):
             shape = ", ".join(f"{value:.4g}" for value in linear.mode_shapes[:, k])
             print(f"  mode {k}: {frequency:.8g} rad/s = {frequency / (2 * np.pi):.6g} Hz   shape ({shape})")
+        if arguments.animate_mode:
+            if not 0 <= arguments.mode < len(linear.coordinates):
+                raise ModelError(f"--mode {arguments.mode}: the model has modes 0 to {len(linear.coordinates) - 1}")
+            print(f"wrote {linear.animate_mode(arguments.mode, arguments.animate_mode)}")
 
 
 def _axis(text: str) -> tuple[str, np.ndarray]:
@@ -117,6 +123,8 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
                      help="hold a coordinate at a value (a drive held); repeatable")
     sub.add_argument("--modes", action="store_true",
                      help="also linearize there and print the natural frequencies and mode shapes")
+    sub.add_argument("--animate-mode", metavar="FILE", help="animate a mode shape (.gif, .mp4 or .html)")
+    sub.add_argument("--mode", type=int, default=0, help="the mode to animate, 0 = lowest (default: 0)")
 
     sub = command("sweep", _sweep, "simulate a grid of parameter values and initial coordinates/speeds (Dask)")
     sub.add_argument("--grid", action="append", type=_axis, required=True, metavar="NAME=START:STOP:COUNT",
