@@ -139,9 +139,8 @@ def _run_case(source, values: Mapping[str, float], settings: Mapping[str, Any]) 
     trajectory = None
     try:
         if isinstance(source, NumericModel):
-            coordinates = source.coordinate_names
-            model = source.with_parameters({k: v for k, v in values.items()
-                                            if k not in coordinates and k.removesuffix("d") not in coordinates})
+            state = _state_names(source)
+            model = source.with_parameters({k: v for k, v in values.items() if k not in state})
         else:
             model = source(dict(values))
         q0, qd0 = _initial_state(model, values, settings)
@@ -157,6 +156,13 @@ def _run_case(source, values: Mapping[str, float], settings: Mapping[str, Any]) 
     return row, trajectory if settings["keep_trajectories"] else None
 
 
+def _state_names(model: NumericModel) -> dict[str, tuple[str, str]]:
+    """Swept names that set the initial state: ``"q1" -> ("q", "q1")``, ``"q1d" -> ("qd", "q1")``."""
+    names = {name: ("q", name) for name in model.coordinate_names}
+    names.update({f"{name}d": ("qd", name) for name in model.coordinate_names})
+    return names
+
+
 def _initial_state(model: NumericModel, values: Mapping[str, float], settings: Mapping[str, Any]):
     """``(q0, qd0)``: the given state, or the guess with swept coordinates/speeds held, assembled."""
     initial = settings["initial_states"]
@@ -165,11 +171,11 @@ def _initial_state(model: NumericModel, values: Mapping[str, float], settings: M
     q, qd = (np.array(x, dtype=float) for x in initial)
     fixed = {name: q[i] for i, name in enumerate(model.coordinate_names) if name in settings["fixed"]}
     qd_fixed = {name: qd[i] for i, name in enumerate(model.coordinate_names) if name in settings["qd_fixed"]}
+    held, state = {"q": fixed, "qd": qd_fixed}, _state_names(model)
     for name, value in values.items():
-        if name in model._coordinate_index:
-            fixed[name] = value
-        elif name.removesuffix("d") in model._coordinate_index:
-            qd_fixed[name.removesuffix("d")] = value
+        if name in state:
+            kind, coordinate = state[name]
+            held[kind][coordinate] = value
     if not fixed and not qd_fixed and not settings["assemble"]:
         return q, qd
     return model.assemble(q, fixed=fixed or None, qd_guess=qd, qd_fixed=qd_fixed or None)
@@ -200,7 +206,7 @@ def _cases(parameters) -> list[dict[str, float]]:
 def _check_names(source, cases: list[dict]) -> None:
     if not isinstance(source, NumericModel):
         return
-    known = set(source.parameter_names) | set(source.coordinate_names) | {f"{n}d" for n in source.coordinate_names}
+    known = set(source.parameter_names) | set(_state_names(source))
     unknown = sorted({name for case in cases for name in case} - known)
     if unknown:
         raise ValueError(f"unknown swept name(s) {', '.join(unknown)}: expected parameters "
