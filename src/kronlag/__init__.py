@@ -7,6 +7,7 @@ Kronecker-product matrix form of Lagrange's equations with multipliers
 """
 
 from . import calculus, frames, joints, models
+from .analysis import Equilibrium, EquilibriumError, LinearModel
 from .derivation import derive
 from .equations import Equations
 from .modelfile import load_model
@@ -20,6 +21,7 @@ from .numeric import (
     SingularConfigurationError,
 )
 from .simulation import simulate
+from .sweeps import SweepResult, sweep
 from .trajectory import Trajectory
 from .reactions import Reaction
 from .joints import FreeBody, Joint, free_body, mechanism
@@ -74,4 +76,9 @@ __all__ = [
     "RedundantConstraintsWarning",
     "simulate",
     "Trajectory",
+    "Equilibrium",
+    "EquilibriumError",
+    "LinearModel",
+    "sweep",
+    "SweepResult",
 ]

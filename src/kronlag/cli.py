@@ -391,16 +391,21 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_argument("--output", metavar="FILE", help="save the results (.csv or .npz)")
     sub.add_argument("--plot", metavar="FILE",
                      help="save a figure of the forces and multipliers (.png, .pdf, .svg, .jpg)")
+
+    from .cli_analysis import add_commands as add_analysis_commands
+
+    add_analysis_commands(command)
     return parser
 
 
 def _numerical_errors() -> tuple[type[Exception], ...]:
     """The numeric layer's failure exceptions (none if it is not installed)."""
     try:
+        from .analysis import EquilibriumError
         from .numeric import AssemblyError, SingularConfigurationError
     except ImportError:
         return ()
-    return AssemblyError, SingularConfigurationError
+    return AssemblyError, SingularConfigurationError, EquilibriumError
 
 
 def main(argv: Sequence[str] | None = None) -> int:

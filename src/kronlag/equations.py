@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from functools import cached_property
+from functools import cached_property, partial
 from typing import TYPE_CHECKING, Any
 
 import sympy as sp
@@ -245,6 +245,18 @@ class Equations:
         m, r, s = self.shape
         return f"Equations({self.system.name!r}, m={m}, r={r}, s={s})"
 
+    # -- pickling ---------------------------------------------------------------
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The fields and cached matrices; ``christoffel_source`` (a closure) becomes a picklable
+        callable: the matrix itself when already computed, else its Christoffel-symbol formula."""
+        state = dict(self.__dict__)
+        if "C_christoffel" in state:
+            state["christoffel_source"] = partial(sp.ImmutableMatrix, state["C_christoffel"])
+        else:
+            state["christoffel_source"] = partial(christoffel_matrix, self.M, self.coordinates, self.speeds)
+        return state
+
     def __str__(self) -> str:
         blocks = [repr(self)]
         for name in MATRIX_NAMES:
@@ -252,3 +264,11 @@ class Equations:
             if matrix.rows:
                 blocks.append(f"{name} =\n{sp.pretty(matrix, use_unicode=False, wrap_line=False)}")
         return "\n\n".join(blocks)
+
+
+def christoffel_matrix(M: sp.MatrixBase, coordinates, speeds) -> sp.ImmutableMatrix:
+    """``C_ij = sum_k 1/2 (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i) qd_k`` (m, m) from ``M`` (m, m)."""
+    m = M.rows
+    derivatives = [M.diff(q) for q in coordinates]
+    return sp.ImmutableMatrix(m, m, lambda i, j: sum(
+        (derivatives[k][i, j] + derivatives[j][i, k] - derivatives[i][j, k]) * speeds[k] / 2 for k in range(m)))

@@ -809,3 +809,66 @@ class NumericModel:
     def __repr__(self) -> str:
         return (f"NumericModel({self.equations.system.name!r}, m={self.m}, r={self.r}, s={self.s}, "
                 f"backend={self.backend!r})")
+
+    # -- parameters of a built model, pickling ------------------------------------------------------
+
+    def parameter_values(self) -> dict[str, float | Callable]:
+        """The parameter values by name: floats, and the callables ``f(t)`` of time-varying ones."""
+        values: dict[str, float | Callable] = dict(zip(self.parameter_names, self._p.tolist()))
+        values.update({self.parameter_names[i]: function for i, function in self._time_varying})
+        return values
+
+    def with_parameters(self, values: Mapping | None = None, **by_name) -> NumericModel:
+        """A model with some parameter values changed, sharing this one's generated and compiled code.
+
+        The equations are not derived, generated nor compiled again: the parameters
+        are an input of every kernel.  ``values`` (keyed by name or symbol) and
+        keyword arguments are merged; the other parameters keep their values.
+        This model is not changed (so a model can be shared by threads or sent to
+        workers while variants are made from it).
+
+        Returns
+        -------
+        NumericModel
+        """
+        changed = self.parameter_values()
+        given = {**(values or {}), **by_name}
+        index = {name: i for i, name in enumerate(self.parameter_names)}
+        for key, name in zip(given, (self.parameter_names[i] for i in _names(list(given), index, "parameter(s)"))):
+            changed[name] = given[key]
+        variant = object.__new__(NumericModel)  # not copy.copy: that would pickle (and rebuild) the code
+        variant.__dict__.update(self.__dict__)
+        variant._p, variant._time_varying = self._resolve(changed)
+        variant.time_varying = bool(variant._time_varying)
+        variant._warned_redundant = False
+        if self.backend == "c":
+            variant._fd_in = np.concatenate([np.zeros(3 + 2 * self.m), variant._p])
+            variant._fd_call = self._dynamics.forward_dynamics_caller(variant._fd_in)
+        return variant
+
+    def __getstate__(self) -> dict:
+        """Only what rebuilds the model: the equations, the parameter values and the backend.
+
+        The compiled libraries (ctypes handles) stay behind; the receiving process
+        generates the kernels again and loads the C library from the on-disk cache
+        (:func:`kronlag.codegen.cache_directory`), compiling it only when absent.
+        Time-varying parameters must be picklable callables (or use cloudpickle).
+        """
+        return {"equations": self.equations, "parameters": self.parameter_values(), "backend": self.backend}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["equations"], state["parameters"], backend=state["backend"])
+
+    # -- static equilibrium and linearization (kronlag.analysis) --------------------------------
+
+    def equilibrium(self, q_guess, *, fixed: Mapping | None = None, **options):
+        """Static equilibrium near ``q_guess``; see :func:`kronlag.analysis.equilibrium`."""
+        from .analysis import equilibrium
+
+        return equilibrium(self, q_guess, fixed=fixed, **options)
+
+    def linearize(self, q, qd=None, *, t: float = 0.0, **options):
+        """Linearized motion about ``(q, qd)``; see :func:`kronlag.analysis.linearize`."""
+        from .analysis import linearize
+
+        return linearize(self, q, qd, t=t, **options)
