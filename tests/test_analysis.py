@@ -213,7 +213,7 @@ def test_mode_animation_stays_on_the_constraint_manifold(four_bar, tmp_path):
     np.testing.assert_allclose([four_bar.Phi(q) for q in motion.q], 0, atol=1e-10)
     crank = motion.q[:, 0] - rest.q[0]
     assert np.max(np.abs(crank)) == pytest.approx(0.2 * np.max(np.abs(linear.mode_shapes[0, 0])), rel=1e-2)
-    path = linear.animate_mode(0, tmp_path / "mode.gif", fps=5, duration=0.4, dpi=30, trace=False)
+    path = linear.animate_mode(0, tmp_path / "mode.gif", fps=5, duration=0.4, width=120, trace=False)
     assert path.stat().st_size > 0
 
 

@@ -386,7 +386,7 @@ class LinearModel:
     def animate_mode(self, k: int, path: str | PathLike | None = None, *, amplitude: float = 0.1,
                      periods: float = 2.0, **options):
         """Animate mode ``k`` (see :meth:`mode_trajectory`) with :func:`kronlag.animation.animate`;
-        ``options`` go to ``animate`` (``fps``, ``duration``, ``dpi``, ...)."""
+        ``options`` go to ``animate`` (``fps``, ``duration``, ``width``, ...)."""
         from .animation import animate
 
         return animate(self.mode_trajectory(k, amplitude=amplitude, periods=periods), path, **options)

@@ -83,7 +83,7 @@ def _axis(text: str) -> tuple[str, np.ndarray]:
 
 
 def _sweep(arguments: argparse.Namespace) -> None:
-    from .cli import NumericalFailure
+    from .cli import IncompleteRun
     from .sweeps import sweep
 
     if arguments.output and Path(arguments.output).suffix not in (".csv", ".parquet"):
@@ -110,7 +110,7 @@ def _sweep(arguments: argparse.Namespace) -> None:
     if len(result.failed):
         for row in result.failed.itertuples():
             print(f"case {row.case}: {row.status}: {row.message}", file=sys.stderr)
-        raise NumericalFailure(f"{len(result.failed)} of {len(table)} cases did not succeed"
+        raise IncompleteRun(f"{len(result.failed)} of {len(table)} cases did not succeed"
                                + (f"; all results are saved in {arguments.output}" if arguments.output else ""))
 
 

@@ -41,6 +41,7 @@ __all__ = [
     "AssemblyError",
     "RedundantConstraintsWarning",
     "solve_augmented",
+    "least_norm",
 ]
 
 #: Kernels whose result is a vector (all others are matrices, even when 1 x 1).
@@ -229,6 +230,17 @@ def solve_augmented(M: np.ndarray, h: np.ndarray, G: np.ndarray, c: np.ndarray, 
     return V @ qt, nu, rank
 
 
+def least_norm(G: np.ndarray, b: np.ndarray, *, rank_rtol: float = RANK_RTOL) -> np.ndarray:
+    """The least-norm least-squares solution ``x`` of ``G x = b`` over the independent rows of ``G``
+    (singular values above ``rank_rtol`` times the largest, :func:`kronlag.tolerances.numerical_rank`):
+    the correction of the projections and of :meth:`NumericModel.assemble`, shape (columns,)."""
+    if G.size == 0:
+        return np.zeros(G.shape[1])
+    U, S, Vt = np.linalg.svd(G, full_matrices=False)
+    rank = numerical_rank(S, rank_rtol)
+    return Vt[:rank].T @ ((U[:, :rank].T @ b) / S[:rank])
+
+
 def _names(keys: Sequence, known: Mapping[str, int], what: str) -> list[int]:
     """Indices of ``keys`` (names or SymPy symbols) in ``known``; ValueError listing unknown ones."""
     names = [key.name if isinstance(key, sp.Symbol) else key for key in keys]
@@ -322,6 +334,8 @@ class NumericModel:
             except (TypeError, ValueError) as error:
                 raise ValueError(f"parameter {self.parameter_names[i]}: expected a number or a callable "
                                  f"f(t), got {value!r}") from error
+            if not np.isfinite(values[i]):
+                raise ValueError(f"parameter {self.parameter_names[i]}: expected a finite number, got {value!r}")
         eq = self.equations
         frozen = [self.parameter_names[i] for i, _ in time_varying
                   if any(getattr(eq, name).has(eq.parameters[i]) for name in ("M", "Phi", "A", "b"))]
@@ -764,7 +778,7 @@ class NumericModel:
             if residual <= tol:
                 break
             phi = self.Phi(q, t)
-            step = np.linalg.lstsq(self.Phi_q(q, t)[:, free], -phi, rcond=None)[0]
+            step = least_norm(self.Phi_q(q, t)[:, free], -phi, rank_rtol=self.rank_rtol)
             factor = 1.0
             while factor > 1e-6:
                 trial = q.copy()
@@ -785,7 +799,7 @@ class NumericModel:
         G = np.vstack([self.Phi_q(q, t), self.A(q, t)])
         target = np.concatenate([np.zeros(self.r), -self.b(q, t)])
         if len(target):
-            qd[free] += np.linalg.lstsq(G[:, free], target - G @ qd, rcond=None)[0]
+            qd[free] += least_norm(G[:, free], target - G @ qd, rank_rtol=self.rank_rtol)
             violation = float(np.max(np.abs(G @ qd - target)))
             allowed = tol * max(1.0, float(np.max(np.abs(G))) * float(np.max(np.abs(qd))))
             if violation > allowed:
@@ -841,9 +855,6 @@ class NumericModel:
         variant._p, variant._time_varying = self._resolve(changed)
         variant.time_varying = bool(variant._time_varying)
         variant._warned_redundant = False
-        if self.backend == "c":
-            variant._fd_in = np.concatenate([np.zeros(3 + 2 * self.m), variant._p])
-            variant._fd_call = self._dynamics.forward_dynamics_caller(variant._fd_in)
         return variant
 
     def __getstate__(self) -> dict:
@@ -854,10 +865,12 @@ class NumericModel:
         (:func:`kronlag.codegen.cache_directory`), compiling it only when absent.
         Time-varying parameters must be picklable callables (or use cloudpickle).
         """
-        return {"equations": self.equations, "parameters": self.parameter_values(), "backend": self.backend}
+        return {"equations": self.equations, "parameters": self.parameter_values(), "backend": self.backend,
+                "rank_rtol": self.rank_rtol}
 
     def __setstate__(self, state: dict) -> None:
-        self.__init__(state["equations"], state["parameters"], backend=state["backend"])
+        self.__init__(state["equations"], state["parameters"], backend=state["backend"],
+                      rank_rtol=state.get("rank_rtol", RANK_RTOL))
 
     # -- static equilibrium and linearization (kronlag.analysis) --------------------------------
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import ctypes
 import time
+import warnings
 import weakref
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
@@ -28,7 +29,7 @@ import numpy as np
 from scipy.integrate import DOP853
 
 from . import codegen
-from .numeric import SingularConfigurationError
+from .numeric import AssemblyError, SingularConfigurationError, least_norm
 from .tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
 from .trajectory import SingularPassage, Trajectory
 
@@ -113,7 +114,8 @@ class MultibodyProblem:
         """Project ``y = [q, qd]`` onto the constraint manifold, shape (2 m,).
 
         Positions by Gauss-Newton steps on ``Phi(q) = 0`` (the smallest correction
-        in the Euclidean norm), until ``max |Phi| <= tol`` or a step is at rounding
+        in the Euclidean norm, over the independent rows: :func:`kronlag.numeric.least_norm`),
+        until ``max |Phi| <= tol`` or a step is at rounding
         level (``|dq| <= 1e-15 (1 + |q|)``)::
 
             q <- q - Phi_q^+ Phi(q)
@@ -136,7 +138,7 @@ class MultibodyProblem:
             if not model.r or stalled or np.max(np.abs(terms["Phi"])) <= tol:
                 break
             jacobian = terms["Phi_q"]
-            step = np.linalg.lstsq(jacobian, terms["Phi"], rcond=None)[0]
+            step = least_norm(jacobian, terms["Phi"], rank_rtol=model.rank_rtol)
             q -= step
             stalled = bool(np.all(np.abs(step) <= _STALL * (1 + np.abs(q))))
             terms = model.dynamics_terms(q, qd, t)
@@ -146,7 +148,7 @@ class MultibodyProblem:
         if model.r + model.s:
             B = np.vstack([terms["Phi_q"], terms["A"]])
             c = np.concatenate([np.zeros(model.r), terms["b"]])
-            qd -= np.linalg.lstsq(B, B @ qd + c, rcond=None)[0]
+            qd -= least_norm(B, B @ qd + c, rank_rtol=model.rank_rtol)
         return np.concatenate([q, qd])
 
 
@@ -624,7 +626,7 @@ def _output_rows(problem: MultibodyProblem, t0: float, options: SolverOptions) -
     """The output times left after ``t0`` (``t_eval`` strictly after it, or an empty array for
     every step) and the number of rows to allocate."""
     if problem.t_eval is None:
-        return np.empty(0), options.max_steps + 1
+        return np.empty(0), min(options.max_steps + 1, _MAX_STEP_ROWS)
     times = np.ascontiguousarray(problem.t_eval[problem.t_eval > t0] if t0 > problem.t0 else problem.t_eval)
     return times, len(times)
 
@@ -711,7 +713,10 @@ _INDEX3_FAILURES = {
     -3: "Newton's method did not converge at the smallest step",
     -4: "the velocities jump at a singular configuration: the motion would leave its branch",
     -6: "the mass matrix is zero at the start",
+    -7: "more steps than output rows: pass t_eval to choose the outputs",
 }
+#: Most rows allocated for outputs at every step (``t_eval`` None): a longer run needs ``t_eval``.
+_MAX_STEP_ROWS = 1_000_000
 
 
 def _failure_message(segment: _Segment, model: NumericModel, reason: str) -> str:
@@ -901,7 +906,9 @@ def _output_times(t_eval: Sequence[float] | np.ndarray | None, t0: float, t1: fl
     if t_eval is None:
         return None
     times = np.asarray(t_eval, dtype=float).ravel()
-    if times.size and (np.any(np.diff(times) <= 0) or times[0] < t0 or times[-1] > t1):
+    if times.size == 0:
+        raise ValueError("t_eval is empty: give at least one output time (or None for every step)")
+    if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0) or times[0] < t0 or times[-1] > t1:
         raise ValueError(f"t_eval must increase strictly and lie in t_span = [{t0}, {t1}]")
     return times
 
@@ -942,7 +949,7 @@ def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, star
 
 def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, method: str = "auto",
              rtol: float = 1e-8, atol: float = 1e-10, t_eval=None, alpha: float | None = None,
-             beta: float | None = None, max_step: float | None = None, max_steps: int = 100_000,
+             beta: float | None = None, max_step: float | None = None, max_steps: int | None = None,
              progress: Callable[[float], object] | None = None) -> Trajectory:
     r"""Integrate the equations of motion of ``model`` over ``t_span``.
 
@@ -993,8 +1000,9 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         unused by ``'ggl'``.
     max_step : float, optional
         Largest step size (unbounded by default).
-    max_steps : int
-        Most accepted steps; reaching it ends the integration with status -1.
+    max_steps : int, optional
+        Most accepted steps; reaching it ends the integration with status -1.  By
+        default 1000 per unit of simulated time, at least 100 000.
     progress : callable, optional
         Called as ``progress(t)`` after every accepted step.
 
@@ -1015,22 +1023,68 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
     """
     started = time.perf_counter()
     t0, t1 = (float(value) for value in t_span)
-    if not t1 > t0:
-        raise ValueError(f"t_span must have t1 > t0, got {t_span!r}")
+    if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
+        raise ValueError(f"t_span must be finite with t1 > t0, got {t_span!r}")
+    for label, value in (("rtol", rtol), ("atol", atol)):
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{label} must be a positive number, got {value!r}")
+    if max_step is not None and not float(max_step) > 0:
+        raise ValueError(f"max_step must be positive, got {max_step!r}")
+    span_steps = max(100_000, int(np.ceil(_STEPS_PER_TIME * (t1 - t0))))
+    if max_steps is None:
+        max_steps = span_steps
+    if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 1):
+        raise ValueError(f"max_steps must be an integer >= 1, got {max_steps!r}")
     name = _resolve_method(method, model)
     default_stabilization = 10.0 if name in (BaumgarteSolver.name, CompiledSolver.name) else 0.0
     options = SolverOptions(rtol=rtol, atol=atol, max_step=np.inf if max_step is None else float(max_step),
-                            max_steps=max_steps, progress=progress)
+                            max_steps=int(max_steps), progress=progress)
     start = MultibodyProblem(model=model, t0=t0, t1=t1, q0=np.asarray(q0, dtype=float).ravel(),
                              qd0=np.asarray(qd0, dtype=float).ravel(), t_eval=_output_times(t_eval, t0, t1),
                              alpha=default_stabilization if alpha is None else float(alpha),
                              beta=default_stabilization if beta is None else float(beta))
-    if start.q0.shape != (model.m,) or start.qd0.shape != (model.m,):
-        raise ValueError(f"q0 and qd0 must have {model.m} entries, got {start.q0.size} and {start.qd0.size}")
-    y0 = start.project(t0, start.y0, options.projection_tol)
-    problem = replace(start, q0=y0[:model.m], qd0=y0[model.m:])
+    for label, value in (("q0", start.q0), ("qd0", start.qd0)):
+        if value.shape != (model.m,):
+            raise ValueError(f"{label} must have {model.m} entries ({', '.join(model.coordinate_names)}), "
+                             f"got {value.size}")
+        bad = [model.coordinate_names[i] for i in np.flatnonzero(~np.isfinite(value))]
+        if bad:
+            raise ValueError(f"{label} is not finite for {', '.join(bad)}")
+    problem = replace(start, **dict(zip(("q0", "qd0"), _consistent_start(start, options))))
     solution = METHODS[name](options).solve(problem)
     return _trajectory(solution, problem, name, started)
+
+
+#: The default ``max_steps``: this many per unit of simulated time, at least 100 000.
+_STEPS_PER_TIME = 1000
+#: An initial state whose projection onto the constraints moves ``q`` by more than this (relative to
+#: ``1 + |q0|``) is refused: the projection may have jumped to another assembly branch.
+_MAX_START_CORRECTION = 1e-3
+#: Corrections of the initial state below this (relative) are the rounding of its assembly: no warning.
+_ROUNDING = 1e-9
+
+
+class InitialStateWarning(UserWarning):
+    """The initial state violated the constraints and was projected onto them."""
+
+
+def _consistent_start(problem: MultibodyProblem, options: SolverOptions) -> tuple[np.ndarray, np.ndarray]:
+    """``(q0, qd0)`` projected onto the constraints; a warning states any correction above ``atol``,
+    and a correction of ``q0`` above :data:`_MAX_START_CORRECTION` is an :class:`AssemblyError`."""
+    m = problem.m
+    y0 = problem.project(problem.t0, problem.y0, options.projection_tol)
+    dq, dqd = (float(np.max(np.abs(x), initial=0.0)) for x in (y0[:m] - problem.q0, y0[m:] - problem.qd0))
+    scale = 1.0 + float(np.max(np.abs(problem.q0), initial=0.0))
+    if dq > _MAX_START_CORRECTION * scale:
+        raise AssemblyError(f"the initial state violates the constraints (max |Phi| = "
+                            f"{np.max(np.abs(problem.model.Phi(problem.q0, problem.t0)), initial=0.0):.3g}): "
+                            f"projecting it would move q by {dq:.3g}, perhaps onto another assembly branch; "
+                            "assemble it with model.assemble(q_guess, fixed=...)", dq)
+    speed = 1.0 + float(np.max(np.abs(problem.qd0), initial=0.0))
+    if dq > max(options.atol, _ROUNDING * scale) or dqd > max(options.atol, _ROUNDING * speed):
+        warnings.warn(f"the initial state violated the constraints and was projected onto them: q moved by "
+                      f"{dq:.3g}, qd by {dqd:.3g} (max abs)", InitialStateWarning, stacklevel=3)
+    return y0[:m], y0[m:]
 
 
 def _resolve_method(method: str, model: NumericModel) -> str:

@@ -77,21 +77,29 @@ enum { KL_PHI = KRONLAG_DYNAMICS_PHI, KL_PHI_Q = KRONLAG_DYNAMICS_PHI_Q, KL_A = 
 #define KL_PROJECTION_FAILED (-1002)
 #define KL_TOO_MUCH_WORK (-1)  /* CV_TOO_MUCH_WORK */
 #define KL_APPROACH 2          /* stopped at the approach to a singular configuration */
+#define KL_SINGULAR (-1003)
+#define KL_OUTPUTS_FULL (-1004) /* every step is an output and there is no room for more */    /* the accelerations are not determined (M singular on the constraints' null space) */
 
 typedef struct {
     const double *p;
     double alpha, beta, tol;
+    int singular;                      /* the right-hand side met a singular configuration ... */
+    double t_singular, y_singular[KL_N];  /* ... there */
 } kl_data;
 
 static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
 {
-    const kl_data *data = user_data;
+    kl_data *data = user_data;
     const double *x = N_VGetArrayPointer(y);
     double *dx = N_VGetArrayPointer(ydot);
     double lam[KL_R + 1], mu[KL_S + 1];
     memcpy(dx, x + KL_M, KL_M * sizeof(double));
-    /* A singular configuration is unrecoverable. */
-    return kronlag_forward_dynamics(t, x, x + KL_M, data->p, data->alpha, data->beta, dx + KL_M, lam, mu) ? -1 : 0;
+    if (!kronlag_forward_dynamics(t, x, x + KL_M, data->p, data->alpha, data->beta, dx + KL_M, lam, mu)) return 0;
+    /* A singular configuration is unrecoverable: remember where, for the message. */
+    data->singular = 1;
+    data->t_singular = t;
+    memcpy(data->y_singular, x, sizeof data->y_singular);
+    return -1;
 }
 
 /* The constraint rows B = [Phi_q; A] (k x m) and offsets c = [0; b] at q. */
@@ -146,6 +154,9 @@ const char *kronlag_cvode_flag_name(int flag)
     if (flag == KL_VERSION_MISMATCH) return "the SUNDIALS library is not version 7";
     if (flag == KL_PROJECTION_FAILED) return "the projection onto the constraints failed";
     if (flag == KL_APPROACH) return "approach to a singular configuration";
+    if (flag == KL_OUTPUTS_FULL) return "more steps than output rows: pass t_eval to choose the outputs";
+    if (flag == KL_SINGULAR) return "singular configuration: M is not positive definite on the null space of "
+                                    "[Phi_q; A], the accelerations are not determined (e.g. Euler angles at gimbal lock)";
     return CVodeGetReturnFlagName(flag);
 }
 
@@ -165,7 +176,7 @@ int kronlag_cvode(const double *p, double t0, double t1, const double *y0, int n
     char label[64];
     SUNDIALSGetVersionNumber(&major, &minor, &patch, label, sizeof label);
     if (major != 7) return KL_VERSION_MISMATCH;
-    kl_data data = {p, alpha, beta, atol / 100.0};
+    kl_data data = {p, alpha, beta, atol / 100.0, 0, 0.0, {0.0}};
     SUNContext ctx = NULL;
     N_Vector y = NULL, dense = NULL;
     SUNMatrix J = NULL;
@@ -209,13 +220,12 @@ int kronlag_cvode(const double *p, double t0, double t1, const double *y0, int n
         kl_constraints(t, x, p, terms, B, c);
         double ratio = kl_monitor_observe(&monitor, t, x, terms + KL_PHI_Q);
         if (n_eval == 0) {
-            if (rows < max_rows) {
-                ++projections;
-                t_out[rows] = t;
-                memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
-                if (kl_project(t, y_out + rows * KL_N, &data)) { flag = KL_PROJECTION_FAILED; break; }
-                ++rows;
-            }
+            if (rows == max_rows) { flag = KL_OUTPUTS_FULL; break; }
+            ++projections;
+            t_out[rows] = t;
+            memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
+            if (kl_project(t, y_out + rows * KL_N, &data)) { flag = KL_PROJECTION_FAILED; break; }
+            ++rows;
         } else {
             for (; next < n_eval && t_eval[next] <= t; ++next, ++rows) {
                 ++projections;
@@ -231,6 +241,11 @@ int kronlag_cvode(const double *p, double t0, double t1, const double *y0, int n
     }
     memcpy(y_end, x, KL_N * sizeof(double));
     if (flag == KL_APPROACH && kl_project(t, y_end, &data)) flag = KL_PROJECTION_FAILED;
+    if (flag < 0 && data.singular) {
+        flag = KL_SINGULAR;
+        t = data.t_singular;
+        memcpy(y_end, data.y_singular, KL_N * sizeof(double));
+    }
 done:
     *n_out = rows;
     *n_events = monitor.count;

@@ -47,6 +47,7 @@
 #define KL3_BRANCH_LOST (-4)
 #define KL3_START_FAILED (-6)
 #define KL3_HANDBACK 1
+#define KL3_OUTPUTS_FULL (-7)
 
 enum { KL3_M = KRONLAG_M, KL3_R = KRONLAG_R };
 
@@ -293,9 +294,9 @@ int kronlag_index3(const double *p, int n_parameters, double t0, double t1, cons
         /* the terms of the step's last evaluation are those of (qn, vn) */
         double ratio = kl_monitor_observe(&monitor, t_new, qn, s.terms + KRONLAG_DYNAMICS_PHI_Q);
         if (n_eval == 0) {
-            if (rows < max_rows)
-                kl3_output(&s, rows++, t_new, qn, vn, an, t_out, y_out, qdd_out, lam_out, energies, phi_out,
-                           velocity_out);
+            if (rows == max_rows) { flag = KL3_OUTPUTS_FULL; break; }
+            kl3_output(&s, rows++, t_new, qn, vn, an, t_out, y_out, qdd_out, lam_out, energies, phi_out,
+                       velocity_out);
         } else {
             for (; next < n_eval && t_eval[next] <= t_new; ++next) {
                 double theta = (t_eval[next] - t) / h, qi[m], vi[m], ai[m];

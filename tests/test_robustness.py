@@ -1,0 +1,141 @@
+"""Bad inputs and failure modes of kronlag.simulate (issue: trustworthy simulation).
+
+Each case is checked against what must happen -- a clear error before any work, or a
+partial trajectory with status -1 and a message naming the place -- never a crash or a
+silent wrong answer.
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings
+
+import numpy as np
+import pytest
+from conftest import derived
+
+import kronlag
+import kronlag.benchmarks.iftomm
+from kronlag.simulation import METHODS, InitialStateWarning
+from kronlag.tolerances import APPROACH_RTOL, rank_magnitudes, singular_ratio
+
+FOUR_BAR = dict(l1=0.2, l2=0.6, l3=0.5, l4=0.5, m1=1.0, m2=2.0, m3=1.5, I1=0.2 ** 2 / 12, I2=2 * 0.6 ** 2 / 12,
+                I3=1.5 * 0.5 ** 2 / 12, g=9.81, tau=0.5)
+
+
+@functools.cache
+def four_bar():
+    model = derived("four_bar").numeric(FOUR_BAR)
+    q0, qd0 = model.assemble([0.3, 0.8, 1.35], fixed={"q1": 0.3})
+    return model, q0, qd0
+
+
+@pytest.mark.parametrize("options, message", [
+    (dict(t_eval=[]), "t_eval is empty"),
+    (dict(t_eval=[0.0, np.nan]), "t_eval"),
+    (dict(max_steps=0), "max_steps"),
+    (dict(max_steps=-1), "max_steps"),
+    (dict(rtol=-1e-8), "rtol"),
+    (dict(rtol=0.0), "rtol"),
+    (dict(atol=np.nan), "atol"),
+    (dict(max_step=0.0), "max_step"),
+])
+def test_bad_options_are_refused_before_any_work(options, message):
+    model, q0, qd0 = four_bar()
+    with pytest.raises(ValueError, match=message):
+        kronlag.simulate(model, (0.0, 1.0), q0, qd0, **options)
+
+
+def test_non_finite_initial_state_names_the_coordinate():
+    model, q0, qd0 = four_bar()
+    q0 = q0.copy()
+    q0[1] = np.nan
+    with pytest.raises(ValueError, match="q0 is not finite for q2"):
+        kronlag.simulate(model, (0.0, 1.0), q0, qd0)
+
+
+def test_non_finite_parameter_is_refused():
+    with pytest.raises(ValueError, match="parameter m2: expected a finite number"):
+        derived("four_bar").numeric({**FOUR_BAR, "m2": float("inf")})
+
+
+def test_slightly_inconsistent_start_is_corrected_with_a_warning():
+    model, q0, qd0 = four_bar()
+    with pytest.warns(InitialStateWarning, match=r"q moved by [0-9.e-]+, qd by"):
+        trajectory = kronlag.simulate(model, (0.0, 0.1), q0 + 1e-6, qd0)
+    assert trajectory.success
+    assert np.max(np.abs(trajectory.position_residual)) < 1e-10
+
+
+def test_consistent_start_gives_no_warning():
+    model, q0, qd0 = four_bar()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InitialStateWarning)
+        kronlag.simulate(model, (0.0, 0.1), q0, qd0)
+
+
+def test_start_far_from_the_constraints_is_an_assembly_error():
+    model, q0, qd0 = four_bar()
+    with pytest.raises(kronlag.AssemblyError, match="another assembly branch"):
+        kronlag.simulate(model, (0.0, 0.1), q0 + np.array([0.0, 0.3, -0.2]), qd0)
+
+
+@pytest.mark.parametrize("method", sorted(METHODS))
+def test_failed_runs_have_equal_length_arrays(method):
+    model, q0, qd0 = four_bar()
+    trajectory = kronlag.simulate(model, (0.0, 100.0), q0, qd0, method=method, max_steps=5,
+                                  t_eval=np.linspace(0.0, 100.0, 7))
+    assert trajectory.status == -1
+    n = len(trajectory.t)
+    for name in ("q", "qd", "qdd", "lam", "kinetic_energy", "potential_energy", "position_residual",
+                 "velocity_residual"):
+        assert len(getattr(trajectory, name)) == n, name
+
+
+def test_gimbal_lock_is_named_as_a_singular_configuration():
+    # Heavy top in Euler angles (precession, nutation, spin) started at nutation 0: the
+    # angular velocity does not determine the precession and spin rates, M is singular.
+    model = derived("heavy_top").numeric(dict(m=1.0, l=0.1, g=9.81, Ixx=0.01, Izz=0.02))
+    q0, qd0 = np.array([0.0, 1e-9, 0.0]), np.array([0.0, 0.5, 0.0])
+    trajectory = kronlag.simulate(model, (0.0, 1.0), q0, qd0, method="compiled")
+    assert trajectory.status == -1
+    assert "singular configuration" in trajectory.message and "t = " in trajectory.message
+    assert "q = [" in trajectory.message
+
+
+def test_singular_ratio_matches_the_singular_values_at_a_passage():
+    # IFToMM A02 (N = 2) with all bars horizontal: Phi_q drops from rank 4 to rank N = 2; off it,
+    # the ratio is of the size of the smallest singular value relative to the largest.
+    benchmark = kronlag.benchmarks.iftomm.benchmark("A02")
+    model = benchmark.numeric()
+    names = model.coordinate_names
+    q = np.zeros(model.m)
+    horizontal = model.Phi_q(q)
+    generic = int(np.linalg.matrix_rank(model.Phi_q(np.full(model.m, 0.3)), tol=1e-8))
+    assert generic == model.r and np.linalg.matrix_rank(horizontal, tol=1e-8) == 2, names
+    ratio, _ = singular_ratio(horizontal, generic)
+    assert ratio < 1e-12
+    tilted = np.array([0.01 if name.startswith("phi") else 0.0 for name in names])
+    ratio, _ = singular_ratio(model.Phi_q(tilted), generic)
+    singular_values = np.linalg.svd(model.Phi_q(tilted), compute_uv=False)
+    assert ratio == pytest.approx(singular_values[-1] / singular_values[0], rel=0.5)
+    assert ratio < APPROACH_RTOL
+    assert len(rank_magnitudes(horizontal)[0]) == model.r
+
+
+def test_index1_methods_stop_at_the_approach_and_the_default_passes():
+    benchmark = kronlag.benchmarks.iftomm.benchmark("A02")
+    model = benchmark.numeric()
+    q0, qd0 = benchmark.initial_state(model)
+    for method in ("compiled", "projection"):
+        trajectory = kronlag.simulate(model, (0.0, 2.0), q0, qd0, method=method)
+        assert trajectory.status == -1 and "approaches a singular configuration" in trajectory.message
+        assert trajectory.t[-1] < 0.72 and len(trajectory.events) == 1
+    trajectory = kronlag.simulate(model, (0.0, 2.0), q0, qd0)
+    assert trajectory.success and trajectory.method == "switching"
+    # two passages in 2 s (all bars horizontal at t ~ 0.71 s and 1.23 s), named by their constraints
+    assert len(trajectory.events) == 2
+    for event, expected in zip(trajectory.events, (0.714, 1.229)):
+        assert event.t == pytest.approx(expected, abs=5e-3)
+        assert event.ratio < APPROACH_RTOL and event.constraints
+    assert benchmark.error(trajectory) < 1e-5
