@@ -27,6 +27,7 @@ import numpy as np
 import sympy as sp
 
 from . import codegen
+from .system import check_parameter_values
 
 if TYPE_CHECKING:
     from .equations import Equations
@@ -190,6 +191,13 @@ class NumericModel:
     backend : {"auto", "numpy", "c"}
         ``"auto"`` is ``"c"`` when a C compiler is available, else ``"numpy"``.
 
+    Raises
+    ------
+    ModelError
+        A body is not physical for these values (a mass not positive, an inertia tensor
+        not positive semidefinite or violating the triangle inequality); see
+        :func:`kronlag.system.check_parameter_values`.
+
     Notes
     -----
     The forward-dynamics kernel is generated and compiled here; the other
@@ -212,6 +220,7 @@ class NumericModel:
         self.parameter_names = tuple(p.name for p in equations.parameters)
         self._p, self._time_varying = self._resolve(parameters)
         self.time_varying = bool(self._time_varying)
+        check_parameter_values(equations.system, dict(zip(self.parameter_names, self.parameter_vector(0.0))))
         self._source = codegen.KernelSource(equations)
         self._libraries: dict[str, codegen.NumpyLibrary | codegen.CLibrary] = {}
         self._dynamics = self._library("dynamics")
