@@ -81,7 +81,17 @@ import sympy as sp
 from sympy.printing.str import StrPrinter
 
 from .expressions import RESERVED_NAMES, ExpressionError, parse_expression
-from .system import ModelError, PlanarBody, PointMass, RigidBody, System, speed_symbol, t
+from .system import (
+    MAX_ROTATION_FACTORS,
+    ModelError,
+    PlanarBody,
+    PointMass,
+    RigidBody,
+    RotationSequence,
+    System,
+    speed_symbol,
+    t,
+)
 
 __all__ = [
     "ModelFileError",
@@ -426,19 +436,21 @@ def _inertia_tensor(reader: _Reader, value, entry: str) -> sp.Matrix:
     return sp.Matrix(reader.matrix(value, entry, 3, 3))
 
 
-def _rotation(reader: _Reader, value, entry: str) -> sp.Matrix:
-    """A 3x3 matrix, or ``{axes = "zxz", angles = [...]}``: ``R = R_a1(angle1) R_a2(angle2) ...``."""
+def _rotation(reader: _Reader, value, entry: str) -> sp.Matrix | RotationSequence:
+    """A 3x3 matrix, or ``{axes = "zxz", angles = [...]}``: ``R = R_a1(angle1) R_a2(angle2) ...``
+    (a :class:`~kronlag.system.RotationSequence`, at most ``MAX_ROTATION_FACTORS`` axes)."""
     if not isinstance(value, dict):
         return sp.Matrix(reader.matrix(value, entry, 3, 3))
     reader.table(value, entry, required=("axes", "angles"))
     axes = reader.string(value["axes"], f"{entry}.axes")
     if not axes or any(axis not in "xyz" for axis in axes):
         raise reader.error(f"{entry}.axes", f"expected a sequence of the letters x, y, z, got {axes!r}")
+    if len(axes) > MAX_ROTATION_FACTORS:
+        raise reader.error(f"{entry}.axes", f"{len(axes)} elementary rotations; at most {MAX_ROTATION_FACTORS} "
+                                            "are allowed")
     angles = reader.vector(value["angles"], f"{entry}.angles", (len(axes),))
-    rotation = sp.eye(3)
-    for axis, angle in zip(axes, angles):
-        rotation = rotation * elementary_rotation(axis, angle)
-    return rotation
+    with reader.entry(entry):
+        return RotationSequence(list(zip(axes, angles)))
 
 
 def _read_items(reader: _Reader, system: System, document: dict) -> None:
@@ -630,9 +642,11 @@ class _Writer:
             return float(expr)
         text = self.printer.doprint(expr)
         try:
-            readable = parse_expression(text, self.symbols) == expr
+            parsed = parse_expression(text, self.symbols)
         except ExpressionError:
-            readable = False
+            parsed = None
+        # Reading may regroup a rational factor over a sum: the same expression, other tree.
+        readable = parsed is not None and (parsed == expr or sp.expand(parsed - expr) == 0)
         if not readable:
             raise ModelError(f"cannot write the expression {expr} in the model-file syntax")
         return text
@@ -714,8 +728,18 @@ def _body_document(writer: _Writer, body: PlanarBody | RigidBody | PointMass) ->
     if isinstance(body, PlanarBody):
         entry["angle"] = writer.expression(body.angle)
     elif isinstance(body, RigidBody):
-        entry.update(rotation=writer.matrix(body.rotation), simplify=body.simplify)
+        entry.update(rotation=_rotation_document(writer, body), simplify=body.simplify)
     return entry
+
+
+def _rotation_document(writer: _Writer, body: RigidBody) -> list | dict[str, Any]:
+    """``{axes, angles}`` for a sequence of rotations about x, y, z; else the matrix."""
+    sequence = body.rotation_sequence
+    names = {(1, 0, 0): "x", (0, 1, 0): "y", (0, 0, 1): "z"}
+    if sequence is not None and all(tuple(axis) in names for axis, _ in sequence.factors):
+        return {"axes": "".join(names[tuple(axis)] for axis, _ in sequence.factors),
+                "angles": [writer.expression(angle) for _, angle in sequence.factors]}
+    return writer.matrix(body.rotation)
 
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
