@@ -65,11 +65,13 @@ Format (every table but ``coordinates`` is optional)::
 
 from __future__ import annotations
 
+import functools
 import json
 import keyword
 import math
 import re
 import tomllib
+import unicodedata
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -77,6 +79,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import pint
 import sympy as sp
 from sympy.printing.str import StrPrinter
 
@@ -138,7 +141,8 @@ class ModelFile:
         Parameter values as written: numbers, or expressions of other
         parameters (``"m1*l1**2/12"``); see :meth:`numeric_values`.
     units : dict of str to str
-        Units of parameters (free text, e.g. ``"kg*m^2"``).
+        SI units of the parameters (a file's units are parsed with ``pint`` and its values
+        converted to SI base units: ``300`` in ``"mm"`` is stored as 0.3 in ``"m"``).
     q_guess, qd_guess : dict of str to sympy.Expr
         Assembly guesses by coordinate name (may use parameters); missing
         coordinates default to 0.
@@ -271,6 +275,9 @@ class _Reader:
 
     def name(self, value, entry: str) -> str:
         name = self.string(value, entry)
+        if unicodedata.normalize("NFKC", name) != name:
+            raise self.error(entry, f"{name!r} is not plain text: expressions would read it as "
+                                    f"{unicodedata.normalize('NFKC', name)!r} (its NFKC form)")
         if not name.isidentifier() or keyword.iskeyword(name) or name in RESERVED_NAMES or name == "t":
             raise self.error(entry, f"{name!r} cannot be a symbol name: use letters, digits and '_' "
                                     "(not starting with a digit), and not a function name, pi, t or a keyword")
@@ -383,16 +390,46 @@ def _read(document: dict, source: str) -> ModelFile:
     return model
 
 
+#: Longest accepted unit text, in characters.
+MAX_UNIT_LENGTH = 100
+
+
+@functools.cache
+def _unit_registry() -> pint.UnitRegistry:
+    return pint.UnitRegistry()
+
+
+def _si_unit(reader: _Reader, text: str, entry: str) -> tuple[pint.Quantity, str]:
+    """``(one unit in SI base units, the SI unit as text)`` for a unit written in a file."""
+    if len(text) > MAX_UNIT_LENGTH:
+        raise reader.error(entry, f"the unit is longer than {MAX_UNIT_LENGTH} characters")
+    registry = _unit_registry()
+    try:
+        unit = registry.Unit(text)
+        one = registry.Quantity(1, unit).to_base_units()
+        zero = registry.Quantity(0, unit).to_base_units()
+    except (pint.PintError, ValueError, TypeError, AttributeError, SyntaxError, KeyError) as error:
+        raise reader.error(entry, f"unknown unit {text!r} ({error})") from None
+    if zero.magnitude != 0:
+        raise reader.error(entry, f"the unit {text!r} has an offset (like degC); give the value in kelvin")
+    return one, f"{one.units:~}"
+
+
 def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
                      ) -> tuple[dict[str, sp.Expr], dict[str, str]]:
+    """Values converted to SI base units (``300`` with unit ``"mm"`` is 0.3, unit ``"m"``;
+    ``90 deg`` is pi/2 rad); the units returned are the SI ones, so that writing the file
+    back and reading it again gives the same numbers."""
     values: dict[str, sp.Expr] = {}
     units: dict[str, str] = {}
     for key, item in table.items():
         entry = f"parameters.{key}"
+        factor = None
         if isinstance(item, dict):
             reader.table(item, entry, optional=("value", "unit", "description"))
             if "unit" in item:
-                units[key] = reader.string(item["unit"], f"{entry}.unit")
+                one, units[key] = _si_unit(reader, reader.string(item["unit"], f"{entry}.unit"), f"{entry}.unit")
+                factor = one.magnitude
             if "description" in item:
                 reader.string(item["description"], f"{entry}.description")
             if "value" not in item:
@@ -401,6 +438,11 @@ def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
         value = reader.expression(item, entry, symbols)
         if key in {s.name for s in value.free_symbols}:
             raise reader.error(entry, "the value refers to the parameter itself")
+        if factor is not None and factor != 1:
+            if value.free_symbols:
+                raise reader.error(entry, f"a value computed from other parameters uses their SI values, so its "
+                                          f"unit must be the SI unit {units[key]!r}")
+            value = value * sp.Float(factor)
         values[key] = value
     return values, units
 
