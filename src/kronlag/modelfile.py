@@ -408,8 +408,8 @@ def _si_unit(reader: _Reader, text: str, entry: str) -> tuple[pint.Quantity, str
         unit = registry.Unit(text)
         one = registry.Quantity(1, unit).to_base_units()
         zero = registry.Quantity(0, unit).to_base_units()
-    except (pint.PintError, ValueError, TypeError, AttributeError, SyntaxError, KeyError) as error:
-        raise reader.error(entry, f"unknown unit {text!r} ({error})") from None
+    except Exception as error:  # pint's parser fails in many ways on text that is not a unit
+        raise reader.error(entry, f"unknown unit {text!r} ({type(error).__name__}: {error})") from None
     if zero.magnitude != 0:
         raise reader.error(entry, f"the unit {text!r} has an offset (like degC); give the value in kelvin")
     return one, f"{one.units:~}"
