@@ -116,7 +116,7 @@ def _vee(skew: se.DenseMatrix) -> list:
 
 #: Largest operation count of an entry of ``J_R`` that ``RigidBody(simplify=True)`` passes
 #: to ``trigsimp``; larger entries are kept unsimplified (trigsimp's cost grows too fast).
-TRIGSIMP_MAX_OPERATIONS = 60
+TRIGSIMP_MAX_OPERATIONS = 45
 
 
 def _rotation_jacobian(body: RigidBody, q: list) -> se.DenseMatrix:

@@ -173,14 +173,6 @@ def slider_crank() -> System:
     return system
 
 
-def _rotation_z(angle) -> sp.Matrix:
-    return sp.Matrix([[cos(angle), -sin(angle), 0], [sin(angle), cos(angle), 0], [0, 0, 1]])
-
-
-def _rotation_x(angle) -> sp.Matrix:
-    return sp.Matrix([[1, 0, 0], [0, cos(angle), -sin(angle)], [0, sin(angle), cos(angle)]])
-
-
 def heavy_top() -> System:
     """Heavy symmetric top spinning about a fixed point at the origin.
 
@@ -192,9 +184,10 @@ def heavy_top() -> System:
     psi, theta, phi = coordinates("psi theta phi")
     m, l, g, Ixx, Izz = sp.symbols("m l g Ixx Izz")
     system = System([psi, theta, phi], parameters=[m, l, g, Ixx, Izz], gravity=(0, 0, -g), name="heavy_top")
-    rotation = _rotation_z(psi) * _rotation_x(theta) * _rotation_z(phi)
+    euler_angles = RotationSequence([("z", psi), ("x", theta), ("z", phi)])
+    rotation = euler_angles.matrix
     system.add_body(RigidBody("top", mass=m, inertia=sp.diag(Ixx, Ixx, Izz),
-                              position=rotation * sp.Matrix([0, 0, l]), rotation=rotation))
+                              position=rotation * sp.Matrix([0, 0, l]), rotation=euler_angles))
     system.add_drawing_line([(0, 0, 0), rotation * sp.Matrix([0, 0, 2 * l])], name="axis")
     system.add_trace(rotation * sp.Matrix([0, 0, 2 * l]), name="axis tip")
     return system
