@@ -101,8 +101,8 @@ def spatial_system(inertia) -> System:
 
 
 @pytest.mark.parametrize("inertia, values, problem", [
-    (sp.diag(1, 1, 1), {"m": -2.0}, "body 'disc': mass = -2 (m); a mass must be positive"),
-    (sp.diag(1, 1, 1), {"m": 0.0}, "body 'disc': mass = 0"),
+    (sp.diag(1, 1, 1), {"m": -2.0}, "body 'disc': mass = -2 (m); a mass must not be negative"),
+    (sp.diag(1, 1, 1), {"m": float("nan")}, "body 'disc': mass = nan"),
     (sp.Matrix([[1, 2, 0], [2, 1, 0], [0, 0, 1]]), {"m": 1.0}, "body 'disc': the inertia tensor is not positive"),
     (sp.diag(1, 1, 3), {"m": 1.0}, "body 'disc': the principal moments of inertia 1, 1, 3 violate the triangle"),
 ])

@@ -194,7 +194,7 @@ class NumericModel:
     Raises
     ------
     ModelError
-        A body is not physical for these values (a mass not positive, an inertia tensor
+        A body is not physical for these values (a negative mass, an inertia tensor
         not positive semidefinite or violating the triangle inequality); see
         :func:`kronlag.system.check_parameter_values`.
 

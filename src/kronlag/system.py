@@ -752,7 +752,9 @@ _PHYSICAL_TOLERANCE = 1e-9
 def check_parameter_values(system: System, values: Mapping[str, float]) -> None:
     """Check that the bodies are physical for the given parameter values.
 
-    Every mass must be positive; a planar moment of inertia non-negative; a spatial
+    Every mass must be non-negative (zero is allowed for an auxiliary massless body; a mass
+    matrix left singular by it is reported by ``forward_dynamics``); a planar moment of
+    inertia non-negative; a spatial
     inertia tensor ``I`` positive semidefinite with principal moments ``I_1, I_2, I_3``
     satisfying the triangle inequalities ``I_a + I_b >= I_c`` (a real mass distribution
     has them).  :class:`kronlag.NumericModel` calls this with the values it was given.
@@ -779,8 +781,8 @@ def check_parameter_values(system: System, values: Mapping[str, float]) -> None:
     for body in system.bodies:
         what = f"body {body.name!r}"
         mass = number(body.mass, f"{what} mass")
-        if not mass > 0:
-            raise ModelError(f"{what}: mass = {mass:.6g} ({body.mass}); a mass must be positive")
+        if not mass >= 0:
+            raise ModelError(f"{what}: mass = {mass:.6g} ({body.mass}); a mass must not be negative")
         if isinstance(body, PlanarBody):
             inertia = number(body.inertia, f"{what} inertia")
             if inertia < 0:
