@@ -153,7 +153,7 @@ class PlanarBody:
 
 #: Most elementary rotations in one :class:`RotationSequence`; more would make the rotation
 #: matrix, and every derivative of it, grow beyond what :func:`kronlag.derive` handles quickly.
-MAX_ROTATION_FACTORS = 24
+MAX_ROTATION_FACTORS = 16
 
 _PRINCIPAL_AXES = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1)}
 
