@@ -183,3 +183,15 @@ def test_large_matrix_rotation_derives_without_unbounded_simplification():
     point = dict(zip(q, np.random.default_rng(2).uniform(-2, 2, 6)))
     numeric = np.array(sp.Matrix(3, 6, [sp.sympify(e) for e in jacobian]).subs(point).evalf(), float)
     np.testing.assert_allclose(numeric, _vee_jacobian_numeric(sp.Matrix(rotation), list(q), point), atol=1e-12)
+
+
+def test_unactuated_ur5_conserves_energy():
+    """The UR5 falling from its example pose with no joint torques: E = T + V is constant."""
+    from kronlag.modelfile import load_example
+    from kronlag.workflows import simulate_model
+
+    trajectory = simulate_model(load_example("ur5"))
+    assert trajectory.success
+    energy = trajectory.kinetic_energy + trajectory.potential_energy
+    assert trajectory.kinetic_energy.max() > 10.0  # it does fall
+    assert np.abs(energy - energy[0]).max() < 1e-6 * trajectory.kinetic_energy.max()
