@@ -22,8 +22,6 @@ MODEL_BUILDERS = {
     "slider_crank": models.slider_crank,
     "heavy_top": models.heavy_top,
     "chaplygin_sleigh": models.chaplygin_sleigh,
-    "ur5": models.ur5,
-    "panda": models.panda,
     "closed_chain_4_absolute": functools.partial(models.closed_chain, 4, "absolute"),
     "closed_chain_4_relative": functools.partial(models.closed_chain, 4, "relative"),
 }
