@@ -99,7 +99,6 @@ def work_sympy(case: str) -> dict:
     mass_matrix = kane.mass_matrix
     seconds = time.perf_counter() - start
     import numpy as np
-    import sympy as sp
 
     import kronlag
     rng = np.random.default_rng(1)

@@ -26,7 +26,6 @@ from __future__ import annotations
 import ast
 import difflib
 import math
-import unicodedata
 from collections.abc import Mapping
 
 import sympy as sp
