@@ -52,9 +52,14 @@ def assert_same_equations(actual: kronlag.Equations, expected: kronlag.Equations
         assert_numerically_equal(getattr(actual, name), getattr(expected, name), state_symbols(expected))
 
 
+#: Serial-arm example files, compared with their Python model numerically (their symbolic
+#: matrices are too large for the 30-digit comparison of ``assert_same_equations``).
+ARMS = ("ur5", "panda")
+
+
 def test_every_builtin_and_example_is_shipped():
-    assert sorted(example_names()) == sorted(EXAMPLES)
-    assert set(models.BUILTIN_MODELS) <= set(EXAMPLES)
+    assert sorted(example_names()) == sorted([*EXAMPLES, *ARMS])
+    assert set(models.BUILTIN_MODELS) <= {*EXAMPLES, *ARMS}
 
 
 @pytest.mark.parametrize("name", sorted(set(EXAMPLES) - NUMERIC_COMPARISON_ONLY))
@@ -62,6 +67,20 @@ def test_example_derives_the_python_model(name):
     model = load_model(example_path(name))
     assert model.description
     assert_same_equations(kronlag.derive(model.system), derived(EXAMPLES[name]))
+
+
+@pytest.mark.parametrize("name", ARMS)
+def test_arm_example_file_gives_the_python_model(name):
+    model = load_model(example_path(name))
+    values = model.numeric_values()
+    from_file = kronlag.derive(model.system).numeric(values, backend="numpy")
+    python = kronlag.derive(models.BUILTIN_MODELS[name]()).numeric(values, backend="numpy")
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        q, qd = rng.uniform(-3, 3, (2, from_file.m))
+        np.testing.assert_allclose(from_file.M(q), python.M(q), rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(from_file.g(q), python.g(q), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(from_file.Cqd(q, qd), python.Cqd(q, qd), rtol=1e-12, atol=1e-12)
 
 
 @pytest.mark.parametrize("name", sorted(EXAMPLES))

@@ -30,8 +30,13 @@ def backend_params(backends=BACKENDS):
 
 
 def parameter_values(name: str) -> dict[str, float]:
+    """Random values; a symmetric top's axial moment is capped at twice the transverse one
+    (the triangle inequality of principal moments, which NumericModel checks)."""
     rng = random.Random(name)
-    return {p.name: value for p, value in random_values(derived(name).parameters, rng).items()}
+    values = {p.name: value for p, value in random_values(derived(name).parameters, rng).items()}
+    if {"Ixx", "Izz"} <= values.keys():
+        values["Izz"] = min(values["Izz"], 2 * values["Ixx"])
+    return values
 
 
 @functools.cache

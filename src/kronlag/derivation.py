@@ -114,15 +114,40 @@ def _vee(skew: se.DenseMatrix) -> list:
     return [skew[2, 1], skew[0, 2], skew[1, 0]]
 
 
+#: Largest operation count of an entry of ``J_R`` that ``RigidBody(simplify=True)`` passes
+#: to ``trigsimp``; larger entries are kept unsimplified (trigsimp's cost grows too fast).
+TRIGSIMP_MAX_OPERATIONS = 45
+
+
 def _rotation_jacobian(body: RigidBody, q: list) -> se.DenseMatrix:
-    """``J_R`` with ``omega_body = J_R qd``: column k is ``vee(R^T dR/dq_k)`` (Theorem 1)."""
+    """``J_R`` with ``omega_body = J_R qd``.
+
+    For a :class:`~kronlag.system.RotationSequence` it is ``sum_k w_k d(angle_k)/dq``
+    (``w_k`` the axis of factor k in the body frame); for a matrix, column k is
+    ``vee(R^T dR/dq_k)`` (Theorem 1), with entries of at most
+    :data:`TRIGSIMP_MAX_OPERATIONS` operations trigsimp'd when ``body.simplify``.
+    """
+    if body.rotation_sequence is not None:
+        jacobian = se.zeros(3, len(q))
+        for axis, angle in body.rotation_sequence.body_axes():
+            angle_gradient = _jacobian(se.DenseMatrix(1, 1, [se.sympify(angle)]), q)
+            if any(not entry.is_zero for entry in angle_gradient):
+                jacobian += _se_matrix(axis) * angle_gradient
+        return jacobian
     rotation = _se_matrix(body.rotation)
     rotation_t = rotation.T
     columns = [_vee(rotation_t * rotation.diff(qk)) for qk in q]
     jacobian = se.DenseMatrix(3, len(q), [columns[k][i] for i in range(3) for k in range(len(q))])
     if body.simplify:
-        jacobian = _se_matrix(sp.Matrix(3, len(q), [sp.trigsimp(sp.sympify(e)) for e in jacobian]))
+        jacobian = jacobian.applyfunc(_bounded_trigsimp)
     return jacobian
+
+
+def _bounded_trigsimp(entry: se.Basic) -> se.Basic:
+    expr = sp.sympify(entry)
+    if sp.count_ops(expr) > TRIGSIMP_MAX_OPERATIONS:
+        return entry
+    return se.sympify(sp.trigsimp(expr))
 
 
 def _weigh(weight, matrix: se.DenseMatrix) -> se.DenseMatrix:

@@ -6,14 +6,17 @@ objects directly; nothing is ever evaluated, ``sympify``'d or imported, so a
 file cannot run code.  What is admitted:
 
 * numbers (integers and finite decimals),
-* the declared symbol names passed in, and the constant ``pi``,
+* the declared symbol names passed in, and the constant ``pi`` (written exactly: Python
+  folds identifiers to their NFKC form, so a fullwidth ``ｍ1`` would silently mean ``m1``;
+  such a name is refused),
 * ``+ - * / **``, unary ``-`` and ``+``, parentheses,
 * calls of :data:`FUNCTIONS` with positional arguments.
 
 Everything else (attribute access, subscripts, strings, keyword arguments,
 lambdas, comprehensions, comparisons, calls of other names, ...) raises
 :class:`ExpressionError`, which names the text and the offending construct.
-Sizes are capped (:data:`MAX_LENGTH`, :data:`MAX_NODES`, :data:`MAX_DEPTH`) and
+Sizes are capped (:data:`MAX_LENGTH`, :data:`MAX_NODES`, :data:`MAX_DEPTH`; a flat
+sum ``a + b + ... + z`` or product counts as one level, however many terms it has) and
 numeric powers are limited (:data:`MAX_EXPONENT`, :data:`MAX_POWER_BITS`) so
 that no text can make the reader run for long or exhaust memory.
 """
@@ -68,6 +71,8 @@ MAX_EXPONENT = 100
 MAX_POWER_BITS = 4096
 
 _BINARY = {ast.Add: sp.Add, ast.Sub: None, ast.Mult: sp.Mul, ast.Div: None, ast.Pow: None}
+#: Operators read as one flat chain: a sum of terms or a product of factors.
+_CHAINS = {ast.Add: "sum", ast.Sub: "sum", ast.Mult: "product", ast.Div: "product"}
 _OPERATOR_HINTS = {
     ast.BitXor: "'^' is not a power; write '**'",
     ast.FloorDiv: "'//' is not supported; write '/'",
@@ -132,6 +137,10 @@ class _Reader:
         return sp.Float(value)
 
     def name(self, node: ast.Name) -> sp.Expr:
+        written = ast.get_source_segment(self.text, node)
+        if written is not None and written != node.id:
+            raise self.fail(f"the name {written!r} is not plain text: Python reads it as {node.id!r} "
+                            f"(its NFKC form); write {node.id!r}", node)
         if node.id in self.symbols:
             return self.symbols[node.id]
         if node.id in CONSTANTS:
@@ -154,19 +163,26 @@ class _Reader:
         if type(node.op) not in _BINARY:
             hint = _OPERATOR_HINTS.get(type(node.op), f"the operator {type(node.op).__name__} is not allowed")
             raise self.fail(hint, node)
-        left = self.convert(node.left, depth + 1)
-        right = self.convert(node.right, depth + 1)
-        if isinstance(node.op, ast.Add):
-            return left + right
-        if isinstance(node.op, ast.Sub):
-            return left - right
-        if isinstance(node.op, ast.Mult):
-            return left * right
-        if isinstance(node.op, ast.Div):
-            if right.is_zero:
-                raise self.fail("division by zero", node)
-            return left / right
-        return self.power(left, right, node)
+        group = _CHAINS.get(type(node.op))
+        if group is None:
+            return self.power(self.convert(node.left, depth + 1), self.convert(node.right, depth + 1), node)
+        # A chain a + b - c + ... (or a * b / c ...) parses as a left-nested tree; it is read
+        # as one level without recursion, so that a flat sum of many terms is not "deep".
+        links = []
+        while isinstance(node, ast.BinOp) and _CHAINS.get(type(node.op)) is group:
+            links.append(node)
+            node = node.left
+        operands = [self.convert(node, depth + 1)]
+        for link in reversed(links):
+            right = self.convert(link.right, depth + 1)
+            if isinstance(link.op, ast.Sub):
+                right = -right
+            elif isinstance(link.op, ast.Div):
+                if right.is_zero:
+                    raise self.fail("division by zero", link)
+                right = 1 / right
+            operands.append(right)
+        return sp.Add(*operands) if group == "sum" else sp.Mul(*operands)
 
     def power(self, base: sp.Expr, exponent: sp.Expr, node: ast.BinOp) -> sp.Expr:
         if exponent.is_number:

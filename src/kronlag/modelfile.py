@@ -74,11 +74,13 @@ Format (every table but ``coordinates`` is optional)::
 
 from __future__ import annotations
 
+import functools
 import json
 import keyword
 import math
 import re
 import tomllib
+import unicodedata
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -86,11 +88,22 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import pint
 import sympy as sp
 from sympy.printing.str import StrPrinter
 
 from .expressions import RESERVED_NAMES, ExpressionError, parse_expression
-from .system import ModelError, PlanarBody, PointMass, RigidBody, System, speed_symbol, t
+from .system import (
+    MAX_ROTATION_FACTORS,
+    ModelError,
+    PlanarBody,
+    PointMass,
+    RigidBody,
+    RotationSequence,
+    System,
+    speed_symbol,
+    t,
+)
 
 __all__ = [
     "ModelFileError",
@@ -137,7 +150,8 @@ class ModelFile:
         Parameter values as written: numbers, or expressions of other
         parameters (``"m1*l1**2/12"``); see :meth:`numeric_values`.
     units : dict of str to str
-        Units of parameters (free text, e.g. ``"kg*m^2"``).
+        SI units of the parameters (a file's units are parsed with ``pint`` and its values
+        converted to SI base units: ``300`` in ``"mm"`` is stored as 0.3 in ``"m"``).
     q_guess, qd_guess : dict of str to sympy.Expr
         Assembly guesses by coordinate name (may use parameters); missing
         coordinates default to 0.
@@ -288,6 +302,9 @@ class _Reader:
 
     def name(self, value, entry: str) -> str:
         name = self.string(value, entry)
+        if unicodedata.normalize("NFKC", name) != name:
+            raise self.error(entry, f"{name!r} is not plain text: expressions would read it as "
+                                    f"{unicodedata.normalize('NFKC', name)!r} (its NFKC form)")
         if not name.isidentifier() or keyword.iskeyword(name) or name in RESERVED_NAMES or name == "t":
             raise self.error(entry, f"{name!r} cannot be a symbol name: use letters, digits and '_' "
                                     "(not starting with a digit), and not a function name, pi, t or a keyword")
@@ -403,16 +420,46 @@ def _read(document: dict, source: str) -> ModelFile:
     return model
 
 
+#: Longest accepted unit text, in characters.
+MAX_UNIT_LENGTH = 100
+
+
+@functools.cache
+def _unit_registry() -> pint.UnitRegistry:
+    return pint.UnitRegistry()
+
+
+def _si_unit(reader: _Reader, text: str, entry: str) -> tuple[pint.Quantity, str]:
+    """``(one unit in SI base units, the SI unit as text)`` for a unit written in a file."""
+    if len(text) > MAX_UNIT_LENGTH:
+        raise reader.error(entry, f"the unit is longer than {MAX_UNIT_LENGTH} characters")
+    registry = _unit_registry()
+    try:
+        unit = registry.Unit(text)
+        one = registry.Quantity(1, unit).to_base_units()
+        zero = registry.Quantity(0, unit).to_base_units()
+    except Exception as error:  # pint's parser fails in many ways on text that is not a unit
+        raise reader.error(entry, f"unknown unit {text!r} ({type(error).__name__}: {error})") from None
+    if zero.magnitude != 0:
+        raise reader.error(entry, f"the unit {text!r} has an offset (like degC); give the value in kelvin")
+    return one, f"{one.units:~}"
+
+
 def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
                      ) -> tuple[dict[str, sp.Expr], dict[str, str]]:
+    """Values converted to SI base units (``300`` with unit ``"mm"`` is 0.3, unit ``"m"``;
+    ``90 deg`` is pi/2 rad); the units returned are the SI ones, so that writing the file
+    back and reading it again gives the same numbers."""
     values: dict[str, sp.Expr] = {}
     units: dict[str, str] = {}
     for key, item in table.items():
         entry = f"parameters.{key}"
+        factor = None
         if isinstance(item, dict):
             reader.table(item, entry, optional=("value", "unit", "description"))
             if "unit" in item:
-                units[key] = reader.string(item["unit"], f"{entry}.unit")
+                one, units[key] = _si_unit(reader, reader.string(item["unit"], f"{entry}.unit"), f"{entry}.unit")
+                factor = one.magnitude
             if "description" in item:
                 reader.string(item["description"], f"{entry}.description")
             if "value" not in item:
@@ -421,6 +468,11 @@ def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
         value = reader.expression(item, entry, symbols)
         if key in {s.name for s in value.free_symbols}:
             raise reader.error(entry, "the value refers to the parameter itself")
+        if factor is not None and factor != 1:
+            if value.free_symbols:
+                raise reader.error(entry, f"a value computed from other parameters uses their SI values, so its "
+                                          f"unit must be the SI unit {units[key]!r}")
+            value = value * sp.Float(factor)
         values[key] = value
     return values, units
 
@@ -456,19 +508,21 @@ def _inertia_tensor(reader: _Reader, value, entry: str) -> sp.Matrix:
     return sp.Matrix(reader.matrix(value, entry, 3, 3))
 
 
-def _rotation(reader: _Reader, value, entry: str) -> sp.Matrix:
-    """A 3x3 matrix, or ``{axes = "zxz", angles = [...]}``: ``R = R_a1(angle1) R_a2(angle2) ...``."""
+def _rotation(reader: _Reader, value, entry: str) -> sp.Matrix | RotationSequence:
+    """A 3x3 matrix, or ``{axes = "zxz", angles = [...]}``: ``R = R_a1(angle1) R_a2(angle2) ...``
+    (a :class:`~kronlag.system.RotationSequence`, at most ``MAX_ROTATION_FACTORS`` axes)."""
     if not isinstance(value, dict):
         return sp.Matrix(reader.matrix(value, entry, 3, 3))
     reader.table(value, entry, required=("axes", "angles"))
     axes = reader.string(value["axes"], f"{entry}.axes")
     if not axes or any(axis not in "xyz" for axis in axes):
         raise reader.error(f"{entry}.axes", f"expected a sequence of the letters x, y, z, got {axes!r}")
+    if len(axes) > MAX_ROTATION_FACTORS:
+        raise reader.error(f"{entry}.axes", f"{len(axes)} elementary rotations; at most {MAX_ROTATION_FACTORS} "
+                                            "are allowed")
     angles = reader.vector(value["angles"], f"{entry}.angles", (len(axes),))
-    rotation = sp.eye(3)
-    for axis, angle in zip(axes, angles):
-        rotation = rotation * elementary_rotation(axis, angle)
-    return rotation
+    with reader.entry(entry):
+        return RotationSequence(list(zip(axes, angles)))
 
 
 def _read_items(reader: _Reader, system: System, document: dict) -> None:
@@ -699,9 +753,11 @@ class _Writer:
             return float(expr)
         text = self.printer.doprint(expr)
         try:
-            readable = parse_expression(text, self.symbols) == expr
+            parsed = parse_expression(text, self.symbols)
         except ExpressionError:
-            readable = False
+            parsed = None
+        # Reading may regroup a rational factor over a sum: the same expression, other tree.
+        readable = parsed is not None and (parsed == expr or sp.expand(parsed - expr) == 0)
         if not readable:
             raise ModelError(f"cannot write the expression {expr} in the model-file syntax")
         return text
@@ -795,8 +851,18 @@ def _body_document(writer: _Writer, body: PlanarBody | RigidBody | PointMass) ->
     if isinstance(body, PlanarBody):
         entry["angle"] = writer.expression(body.angle)
     elif isinstance(body, RigidBody):
-        entry.update(rotation=writer.matrix(body.rotation), simplify=body.simplify)
+        entry.update(rotation=_rotation_document(writer, body), simplify=body.simplify)
     return entry
+
+
+def _rotation_document(writer: _Writer, body: RigidBody) -> list | dict[str, Any]:
+    """``{axes, angles}`` for a sequence of rotations about x, y, z; else the matrix."""
+    sequence = body.rotation_sequence
+    names = {(1, 0, 0): "x", (0, 1, 0): "y", (0, 0, 1): "z"}
+    if sequence is not None and all(tuple(axis) in names for axis, _ in sequence.factors):
+        return {"axes": "".join(names[tuple(axis)] for axis, _ in sequence.factors),
+                "angles": [writer.expression(angle) for _, angle in sequence.factors]}
+    return writer.matrix(body.rotation)
 
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")

@@ -28,6 +28,7 @@ import sympy as sp
 
 from . import codegen
 from .tolerances import CHOLESKY_RTOL, RANK_RTOL, check_rank_rtol, numerical_rank
+from .system import check_parameter_values
 
 if TYPE_CHECKING:
     from .equations import Equations
@@ -272,6 +273,13 @@ class NumericModel:
         Relative rank tolerance on ``[Phi_q; A]`` shared by forward dynamics, the
         projections, :meth:`assemble` and the integrators (see :mod:`kronlag.tolerances`).
 
+    Raises
+    ------
+    ModelError
+        A body is not physical for these values (a negative mass, an inertia tensor
+        not positive semidefinite or violating the triangle inequality); see
+        :func:`kronlag.system.check_parameter_values`.
+
     Notes
     -----
     The forward-dynamics kernel is generated and compiled here; the other
@@ -299,6 +307,7 @@ class NumericModel:
         self.parameter_names = tuple(p.name for p in equations.parameters)
         self._p, self._time_varying = self._resolve(parameters)
         self.time_varying = bool(self._time_varying)
+        check_parameter_values(equations.system, dict(zip(self.parameter_names, self.parameter_vector(0.0))))
         self._source = codegen.KernelSource(equations)
         self._libraries: dict[str, codegen.KernelLibrary] = {}
         self._evaluators: dict[str, Callable[..., np.ndarray]] = {}

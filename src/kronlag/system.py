@@ -19,9 +19,10 @@ creates.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
+import numpy as np
 import sympy as sp
 
 __all__ = [
@@ -32,6 +33,9 @@ __all__ = [
     "acceleration_symbol",
     "PlanarBody",
     "RigidBody",
+    "RotationSequence",
+    "MAX_ROTATION_FACTORS",
+    "check_parameter_values",
     "PointMass",
     "Spring",
     "Damper",
@@ -147,6 +151,165 @@ class PlanarBody:
         object.__setattr__(self, "angle", _scalar(angle, f"{what} angle"))
 
 
+#: Most elementary rotations in one :class:`RotationSequence`; more would make the rotation
+#: matrix, and every derivative of it, grow beyond what :func:`kronlag.derive` handles quickly.
+MAX_ROTATION_FACTORS = 16
+
+_PRINCIPAL_AXES = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1)}
+
+
+def _axis_rotation(axis: sp.ImmutableMatrix, angle: sp.Expr) -> sp.ImmutableMatrix:
+    """Rodrigues' formula ``I + sin(angle) [u]x + (1 - cos(angle)) [u]x^2`` for a unit axis ``u``."""
+    cross = sp.Matrix([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return sp.ImmutableMatrix(sp.eye(3) + sp.sin(angle) * cross + (1 - sp.cos(angle)) * cross * cross)
+
+
+@dataclass(frozen=True)
+class RotationSequence:
+    """A rotation composed of elementary rotations, ``R = R_1(angle_1) R_2(angle_2) ... R_n(angle_n)``.
+
+    ``R_k`` turns by ``angle_k`` (an expression of q and parameters) about the constant unit
+    axis ``u_k``.  Because the factors are known, the body-frame angular velocity needs no
+    simplification (see :meth:`body_axes`)::
+
+        omega_body = sum_k (R_{k+1} ... R_n)^T u_k d(angle_k)/dt
+
+    Parameters
+    ----------
+    factors : sequence of (axis, angle)
+        ``axis`` is ``"x"``, ``"y"``, ``"z"`` or a constant unit 3-vector; at most
+        :data:`MAX_ROTATION_FACTORS` factors.
+
+    Examples
+    --------
+    >>> import sympy as sp
+    >>> psi, theta = sp.symbols("psi theta")
+    >>> RotationSequence([("z", psi), ("x", theta)]).matrix[2, :]
+    Matrix([[0, sin(theta), cos(theta)]])
+    """
+
+    factors: tuple[tuple[sp.ImmutableMatrix, sp.Expr], ...]
+
+    def __init__(self, factors, *, what: str = "rotation sequence"):
+        if isinstance(factors, str) or not isinstance(factors, Iterable):
+            raise ModelError(f"{what}: expected a sequence of (axis, angle) pairs, got {type(factors).__name__}")
+        pairs = list(factors)
+        if not pairs:
+            raise ModelError(f"{what}: needs at least one elementary rotation")
+        if len(pairs) > MAX_ROTATION_FACTORS:
+            raise ModelError(f"{what}: {len(pairs)} elementary rotations, at most {MAX_ROTATION_FACTORS} "
+                             "are allowed (compose them with fewer factors)")
+        checked = []
+        for k, pair in enumerate(pairs):
+            if isinstance(pair, str) or not isinstance(pair, Sequence) or len(pair) != 2:
+                raise ModelError(f"{what} factor {k}: expected a pair (axis, angle), got {pair!r}")
+            axis, angle = pair
+            if isinstance(axis, str):
+                if axis not in _PRINCIPAL_AXES:
+                    raise ModelError(f"{what} factor {k}: axis must be 'x', 'y', 'z' or a unit 3-vector, "
+                                     f"got {axis!r}")
+                axis = _PRINCIPAL_AXES[axis]
+            vector = _vector(axis, f"{what} factor {k} axis", (3,))
+            norm_error = sp.simplify((vector.T * vector)[0, 0] - 1)
+            if norm_error != 0:
+                raise ModelError(f"{what} factor {k}: the axis {list(vector)} is not a unit vector "
+                                 f"(|u|^2 - 1 = {norm_error})")
+            checked.append((vector, _scalar(angle, f"{what} factor {k} angle")))
+        object.__setattr__(self, "factors", tuple(checked))
+
+    def _factor_matrix(self, k: int) -> sp.ImmutableMatrix:
+        axis, angle = self.factors[k]
+        principal = next((name for name, unit in _PRINCIPAL_AXES.items() if list(axis) == list(unit)), None)
+        if principal is None:
+            return _axis_rotation(axis, angle)
+        c, s = sp.cos(angle), sp.sin(angle)
+        return sp.ImmutableMatrix({"x": [[1, 0, 0], [0, c, -s], [0, s, c]],
+                                   "y": [[c, 0, s], [0, 1, 0], [-s, 0, c]],
+                                   "z": [[c, -s, 0], [s, c, 0], [0, 0, 1]]}[principal])
+
+    @property
+    def matrix(self) -> sp.ImmutableMatrix:
+        """``R`` (3x3): maps body-frame components to the frame the sequence starts in."""
+        rotation = sp.eye(3)
+        for k in range(len(self.factors)):
+            rotation = rotation * self._factor_matrix(k)
+        return sp.ImmutableMatrix(rotation)
+
+    def body_axes(self) -> list[tuple[sp.ImmutableMatrix, sp.Expr]]:
+        """``[(w_k, angle_k)]`` with ``w_k = (R_{k+1} ... R_n)^T u_k``, the axis of factor k in the body
+        frame, so that ``omega_body = sum_k w_k d(angle_k)/dt``."""
+        result = []
+        tail = sp.eye(3)
+        for k in reversed(range(len(self.factors))):
+            axis, angle = self.factors[k]
+            result.append((sp.ImmutableMatrix(tail.T * axis), angle))
+            tail = self._factor_matrix(k) * tail
+        return result[::-1]
+
+
+#: Random points at which a rotation matrix is checked numerically for orthogonality.
+_ORTHOGONALITY_POINTS = 4
+#: Relative tolerance of the numeric orthogonality check.
+_ORTHOGONALITY_TOLERANCE = 1e-9
+#: Largest operation count of an entry of ``R^T R - I`` that is simplified symbolically.
+_SYMBOLIC_CHECK_OPERATIONS = 40
+
+
+def _check_rotation(rotation: sp.ImmutableMatrix, what: str) -> None:
+    """Raise :class:`ModelError` unless ``rotation`` is orthogonal with determinant +1.
+
+    Entries of ``R^T R - I`` small enough are simplified symbolically (a zero is a
+    proof); otherwise, or if some entry does not simplify to zero, ``R`` is evaluated at
+    :data:`_ORTHOGONALITY_POINTS` random points of its symbols (uniform in [-2, 2]).  A
+    rotation written with Euler parameters is orthogonal only on their normalization
+    constraint: ``R^T R = s(q) I`` with a factor ``s`` that varies with the coordinates is
+    accepted as such, a constant factor other than 1 is not.
+    """
+    deviation = rotation.T * rotation - sp.eye(3)
+    if all(sp.count_ops(entry) <= _SYMBOLIC_CHECK_OPERATIONS for entry in deviation):
+        if (all(sp.trigsimp(sp.expand(entry)) == 0 for entry in deviation)
+                and sp.trigsimp(sp.expand(rotation.det())) == 1):
+            return
+    symbols = sorted(rotation.free_symbols, key=lambda symbol: symbol.name)
+    evaluate = sp.lambdify(symbols, rotation, modules="numpy")
+    generator = np.random.default_rng(20111)
+    points: list[tuple[dict, np.ndarray]] = []
+    for _ in range(10 * _ORTHOGONALITY_POINTS):
+        values = generator.uniform(-2.0, 2.0, len(symbols))
+        with np.errstate(all="ignore"):
+            try:
+                matrix = np.array(evaluate(*values), dtype=float)
+            except (ZeroDivisionError, ValueError, TypeError, OverflowError):
+                continue
+        if np.all(np.isfinite(matrix)):
+            points.append((dict(zip((s.name for s in symbols), values)), matrix))
+        if len(points) == _ORTHOGONALITY_POINTS:
+            break
+    if not points:
+        raise ModelError(f"{what} cannot be evaluated at random values of its symbols "
+                         f"{', '.join(s.name for s in symbols)} (to check that it is orthogonal)")
+    scales = []
+    for point, matrix in points:
+        gram = matrix.T @ matrix
+        scale = np.trace(gram) / 3
+        where = ", ".join(f"{name}={value:.4g}" for name, value in point.items()) or "its constant value"
+        off = np.abs(gram - scale * np.eye(3))
+        if off.max() > _ORTHOGONALITY_TOLERANCE * max(1.0, scale):
+            i, j = np.unravel_index(np.argmax(off), off.shape)
+            expected = f"{scale:.6g}" if i == j else "0"
+            raise ModelError(f"{what} is not orthogonal: (R^T R)[{i},{j}] = {gram[i, j]:.6g}, expected {expected} "
+                             f"(columns {i} and {j} of R are not orthonormal) at {where}")
+        determinant = np.linalg.det(matrix)
+        if determinant <= 0:
+            raise ModelError(f"{what} has determinant {determinant:.6g} at {where}: "
+                             "it is a reflection, not a rotation (expected +1)")
+        scales.append(scale)
+    if np.ptp(scales) <= _ORTHOGONALITY_TOLERANCE and abs(scales[0] - 1) > _ORTHOGONALITY_TOLERANCE:
+        where = ", ".join(f"{name}={value:.4g}" for name, value in points[0][0].items()) or "its constant value"
+        raise ModelError(f"{what} is not orthogonal: R^T R = {scales[0]:.6g} I (expected the identity, "
+                         f"(R^T R)[0,0] = {scales[0]:.6g}) at {where}")
+
+
 @dataclass(frozen=True)
 class RigidBody:
     """A rigid body moving in space.
@@ -159,14 +322,19 @@ class RigidBody:
         Inertia tensor about the centre of mass in the body frame.
     position : 3 expressions of q
         Centre of mass in the inertial frame.
-    rotation : 3x3 matrix of expressions of q
-        ``R(q)`` maps body-frame components to inertial components.  The
-        body-frame angular velocity ``omega = J_R qd`` follows from the skew
-        matrix ``R^T dR/dt`` (Theorem 1).
+    rotation : 3x3 matrix of expressions of q, or RotationSequence
+        ``R(q)`` maps body-frame components to inertial components; it must be orthogonal
+        with determinant +1 (checked symbolically where cheap, else numerically at random
+        points; the error names the entry of ``R^T R`` that is off).  The body-frame
+        angular velocity is ``omega = J_R qd``.  For a :class:`RotationSequence` ``J_R``
+        follows from the factors' axes (no simplification needed); for a matrix, its
+        column k is ``vee(R^T dR/dq_k)`` (Theorem 1).
     simplify : bool
-        Apply ``trigsimp`` to the entries of ``J_R`` (default ``True``); worth
-        it for Euler-angle rotations, whose ``R^T dR/dq_k`` hides many
-        ``sin^2 + cos^2``.
+        For a rotation given as a matrix: apply ``trigsimp`` to the entries of ``J_R``
+        (default ``True``) that are small enough for it to be cheap (at most
+        ``kronlag.derivation.TRIGSIMP_MAX_OPERATIONS`` operations); larger entries are kept
+        as they are, so that the cost stays bounded.  Worth it for Euler-angle rotations,
+        whose ``R^T dR/dq_k`` hides many ``sin^2 + cos^2``.
     """
 
     name: str
@@ -175,6 +343,7 @@ class RigidBody:
     position: sp.ImmutableMatrix
     rotation: sp.ImmutableMatrix
     simplify: bool = True
+    rotation_sequence: RotationSequence | None = None
 
     dimension = 3
 
@@ -191,7 +360,14 @@ class RigidBody:
                              f"but [{j},{i}] = {tensor[j, i]}")
         object.__setattr__(self, "inertia", tensor)
         object.__setattr__(self, "position", _vector(position, f"{what} position", (3,)))
-        object.__setattr__(self, "rotation", _matrix(rotation, (3, 3), f"{what} rotation"))
+        if isinstance(rotation, RotationSequence):
+            object.__setattr__(self, "rotation_sequence", rotation)
+            object.__setattr__(self, "rotation", rotation.matrix)
+        else:
+            object.__setattr__(self, "rotation_sequence", None)
+            matrix = _matrix(rotation, (3, 3), f"{what} rotation")
+            _check_rotation(matrix, f"{what} rotation")
+            object.__setattr__(self, "rotation", matrix)
         object.__setattr__(self, "simplify", bool(simplify))
 
 
@@ -596,3 +772,60 @@ class System:
     def __repr__(self) -> str:
         return (f"System({self.name!r}, m={len(self.coordinates)}, bodies={len(self.bodies)}, "
                 f"r={len(self.constraints)}, s={len(self.nonholonomic_constraints)})")
+
+
+#: Relative tolerance of the physical checks of :func:`check_parameter_values`.
+_PHYSICAL_TOLERANCE = 1e-9
+
+
+def check_parameter_values(system: System, values: Mapping[str, float]) -> None:
+    """Check that the bodies are physical for the given parameter values.
+
+    Every mass must be non-negative (zero is allowed for an auxiliary massless body; a mass
+    matrix left singular by it is reported by ``forward_dynamics``); a planar moment of
+    inertia non-negative; a spatial
+    inertia tensor ``I`` positive semidefinite with principal moments ``I_1, I_2, I_3``
+    satisfying the triangle inequalities ``I_a + I_b >= I_c`` (a real mass distribution
+    has them).  :class:`kronlag.NumericModel` calls this with the values it was given.
+
+    Parameters
+    ----------
+    system : System
+    values : mapping of parameter name to float
+
+    Raises
+    ------
+    ModelError
+        Naming the body, the quantity and its value.
+    """
+    symbols = {symbol: sp.Float(float(values[symbol.name])) for symbol in system.parameters if symbol.name in values}
+
+    def number(expr, what: str) -> float:
+        value = sp.sympify(expr).xreplace(symbols)
+        if value.free_symbols:
+            raise ModelError(f"{what} depends on {', '.join(sorted(s.name for s in value.free_symbols))}, "
+                             "which have no value")
+        return float(value)
+
+    for body in system.bodies:
+        what = f"body {body.name!r}"
+        mass = number(body.mass, f"{what} mass")
+        if not mass >= 0:
+            raise ModelError(f"{what}: mass = {mass:.6g} ({body.mass}); a mass must not be negative")
+        if isinstance(body, PlanarBody):
+            inertia = number(body.inertia, f"{what} inertia")
+            if inertia < 0:
+                raise ModelError(f"{what}: moment of inertia = {inertia:.6g} ({body.inertia}); "
+                                 "it must not be negative")
+        elif isinstance(body, RigidBody):
+            tensor = np.array([[number(body.inertia[i, j], f"{what} inertia[{i},{j}]") for j in range(3)]
+                               for i in range(3)])
+            moments = np.linalg.eigvalsh(tensor)
+            tolerance = _PHYSICAL_TOLERANCE * max(1e-300, np.abs(moments).max())
+            if moments[0] < -tolerance:
+                raise ModelError(f"{what}: the inertia tensor is not positive semidefinite (principal moments "
+                                 f"{', '.join(f'{value:.6g}' for value in moments)}); tensor {tensor.tolist()}")
+            if moments[0] + moments[1] < moments[2] - tolerance:
+                raise ModelError(f"{what}: the principal moments of inertia {', '.join(f'{v:.6g}' for v in moments)} "
+                                 f"violate the triangle inequality I1 + I2 >= I3 ({moments[0] + moments[1]:.6g} < "
+                                 f"{moments[2]:.6g}): no mass distribution has them")

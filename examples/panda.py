@@ -1,0 +1,12 @@
+"""Franka Emika Panda arm falling under gravity from a bent pose, joints unactuated.
+
+Simulates the shipped model file and writes ``panda.png``.
+Run: ``python3 examples/panda.py``.
+"""
+
+from kronlag.modelfile import load_example
+from kronlag.workflows import simulate_model
+
+trajectory = simulate_model(load_example("panda"))
+print(trajectory.message)
+trajectory.plot(path="panda.png")
