@@ -22,7 +22,7 @@ from .numeric import (
 )
 from .simulation import simulate
 from .sweeps import SweepResult, sweep
-from .trajectory import Trajectory
+from .trajectory import SingularPassage, Trajectory
 from .reactions import Reaction
 from .joints import FreeBody, Joint, free_body, mechanism
 from .frames import Frame
@@ -80,6 +80,7 @@ __all__ = [
     "RedundantConstraintsWarning",
     "simulate",
     "Trajectory",
+    "SingularPassage",
     "Equilibrium",
     "EquilibriumError",
     "LinearModel",

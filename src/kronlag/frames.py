@@ -128,13 +128,14 @@ def euler_sequence(axes: str, angles: Sequence, *, extrinsic: bool = False) -> s
 def euler_parameters(e0, e1, e2, e3) -> sp.Matrix:
     """Rotation from Euler parameters (a unit quaternion ``e0 + e1 i + e2 j + e3 k``).
 
-    ``R = (2 e0^2 - 1) I + 2 (e e^T + e0 [e]x)`` with ``e = (e1, e2, e3)``; it is a
-    rotation only where ``e0^2 + e1^2 + e2^2 + e3^2 = 1``: add
-    :func:`euler_parameter_constraint` to the system (:func:`kronlag.joints.free_body`
-    does).
+    ``R = (e0^2 - e^T e) I + 2 (e e^T + e0 [e]x)`` with ``e = (e1, e2, e3)``, the
+    homogeneous form (equal to ``(2 e0^2 - 1) I + 2 (e e^T + e0 [e]x)`` on the unit
+    sphere, and ``R^T R = (e0^2 + e^T e)^2 I`` everywhere); it is a rotation only where
+    ``e0^2 + e1^2 + e2^2 + e3^2 = 1``: add :func:`euler_parameter_constraint` to the
+    system (:func:`kronlag.joints.free_body` does).
     """
     e = sp.Matrix([e1, e2, e3])
-    return (2 * e0 ** 2 - 1) * sp.eye(3) + 2 * (e * e.T + e0 * skew(e))
+    return (e0 ** 2 - (e.T * e)[0, 0]) * sp.eye(3) + 2 * (e * e.T + e0 * skew(e))
 
 
 def euler_parameter_constraint(e0, e1, e2, e3) -> sp.Expr:

@@ -308,6 +308,7 @@ class NumericModel:
         self._p, self._time_varying = self._resolve(parameters)
         self.time_varying = bool(self._time_varying)
         check_parameter_values(equations.system, dict(zip(self.parameter_names, self.parameter_vector(0.0))))
+        self._check_finite()
         self._source = codegen.KernelSource(equations)
         self._libraries: dict[str, codegen.KernelLibrary] = {}
         self._evaluators: dict[str, Callable[..., np.ndarray]] = {}
@@ -343,8 +344,7 @@ class NumericModel:
             except (TypeError, ValueError) as error:
                 raise ValueError(f"parameter {self.parameter_names[i]}: expected a number or a callable "
                                  f"f(t), got {value!r}") from error
-            if not np.isfinite(values[i]):
-                raise ValueError(f"parameter {self.parameter_names[i]}: expected a finite number, got {value!r}")
+
         eq = self.equations
         frozen = [self.parameter_names[i] for i, _ in time_varying
                   if any(getattr(eq, name).has(eq.parameters[i]) for name in ("M", "Phi", "A", "b"))]
@@ -352,6 +352,12 @@ class NumericModel:
             raise ValueError(f"parameter(s) {', '.join(frozen)} enter M or the constraints and cannot vary "
                              "with time (the equations would need their time derivatives)")
         return values, time_varying
+
+    def _check_finite(self) -> None:
+        """ValueError naming the first constant parameter that is not a finite number."""
+        bad = [name for name, value in zip(self.parameter_names, self._p) if not np.isfinite(value)]
+        if bad:
+            raise ValueError(f"parameter {bad[0]}: expected a finite number, got {self._p[self.parameter_names.index(bad[0])]!r}")
 
     def parameter_vector(self, t: float = 0.0) -> np.ndarray:
         """Parameter values ``p`` at time ``t`` (order of ``parameter_names``), shape (P,)."""
@@ -862,6 +868,7 @@ class NumericModel:
         variant = object.__new__(NumericModel)  # not copy.copy: that would pickle (and rebuild) the code
         variant.__dict__.update(self.__dict__)
         variant._p, variant._time_varying = self._resolve(changed)
+        variant._check_finite()
         variant.time_varying = bool(variant._time_varying)
         variant._warned_redundant = False
         return variant

@@ -19,7 +19,7 @@ creates.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -805,27 +805,41 @@ def check_parameter_values(system: System, values: Mapping[str, float]) -> None:
         if value.free_symbols:
             raise ModelError(f"{what} depends on {', '.join(sorted(s.name for s in value.free_symbols))}, "
                              "which have no value")
+        if value.is_real is False:  # reported by the code generation, with the matrix entry
+            raise _NotReal
         return float(value)
 
     for body in system.bodies:
-        what = f"body {body.name!r}"
-        mass = number(body.mass, f"{what} mass")
-        if not mass >= 0:
-            raise ModelError(f"{what}: mass = {mass:.6g} ({body.mass}); a mass must not be negative")
-        if isinstance(body, PlanarBody):
-            inertia = number(body.inertia, f"{what} inertia")
-            if inertia < 0:
-                raise ModelError(f"{what}: moment of inertia = {inertia:.6g} ({body.inertia}); "
-                                 "it must not be negative")
-        elif isinstance(body, RigidBody):
-            tensor = np.array([[number(body.inertia[i, j], f"{what} inertia[{i},{j}]") for j in range(3)]
-                               for i in range(3)])
-            moments = np.linalg.eigvalsh(tensor)
-            tolerance = _PHYSICAL_TOLERANCE * max(1e-300, np.abs(moments).max())
-            if moments[0] < -tolerance:
-                raise ModelError(f"{what}: the inertia tensor is not positive semidefinite (principal moments "
-                                 f"{', '.join(f'{value:.6g}' for value in moments)}); tensor {tensor.tolist()}")
-            if moments[0] + moments[1] < moments[2] - tolerance:
-                raise ModelError(f"{what}: the principal moments of inertia {', '.join(f'{v:.6g}' for v in moments)} "
-                                 f"violate the triangle inequality I1 + I2 >= I3 ({moments[0] + moments[1]:.6g} < "
-                                 f"{moments[2]:.6g}): no mass distribution has them")
+        try:
+            _check_body(body, number)
+        except _NotReal:
+            continue
+
+
+class _NotReal(Exception):
+    """A body's mass or inertia is not a real number (see :func:`check_parameter_values`)."""
+
+
+def _check_body(body, number: Callable[[object, str], float]) -> None:
+    """The checks of :func:`check_parameter_values` for one body."""
+    what = f"body {body.name!r}"
+    mass = number(body.mass, f"{what} mass")
+    if not mass >= 0:
+        raise ModelError(f"{what}: mass = {mass:.6g} ({body.mass}); a mass must not be negative")
+    if isinstance(body, PlanarBody):
+        inertia = number(body.inertia, f"{what} inertia")
+        if inertia < 0:
+            raise ModelError(f"{what}: moment of inertia = {inertia:.6g} ({body.inertia}); "
+                             "it must not be negative")
+    elif isinstance(body, RigidBody):
+        tensor = np.array([[number(body.inertia[i, j], f"{what} inertia[{i},{j}]") for j in range(3)]
+                           for i in range(3)])
+        moments = np.linalg.eigvalsh(tensor)
+        tolerance = _PHYSICAL_TOLERANCE * max(1e-300, np.abs(moments).max())
+        if moments[0] < -tolerance:
+            raise ModelError(f"{what}: the inertia tensor is not positive semidefinite (principal moments "
+                             f"{', '.join(f'{value:.6g}' for value in moments)}); tensor {tensor.tolist()}")
+        if moments[0] + moments[1] < moments[2] - tolerance:
+            raise ModelError(f"{what}: the principal moments of inertia {', '.join(f'{v:.6g}' for v in moments)} "
+                             f"violate the triangle inequality I1 + I2 >= I3 ({moments[0] + moments[1]:.6g} < "
+                             f"{moments[2]:.6g}): no mass distribution has them")
