@@ -48,6 +48,10 @@ __all__ = [
     "ProjectionSolver",
     "GGLSolver",
     "CompiledSolver",
+    "Index3Solver",
+    "SwitchingSolver",
+    "InitialStateWarning",
+    "AUTO_PREFERENCE",
 ]
 
 
@@ -213,6 +217,8 @@ class Solver(ABC):
     order: ClassVar[str]
     #: What a model needs for this method (said when :meth:`supports` is False).
     requirements: ClassVar[str] = "nothing"
+    #: Default Baumgarte ``alpha`` and ``beta`` of the index-1 ODE it integrates (0: none).
+    stabilization: ClassVar[float] = 0.0
 
     @staticmethod
     def supports(model: NumericModel) -> bool:
@@ -409,6 +415,7 @@ class BaumgarteSolver(Solver):
 
     name = "baumgarte"
     formulation = "index-1 ODE, Baumgarte stabilization"
+    stabilization = 10.0
     order = "8 (Dormand-Prince 8(5,3), scipy DOP853)"
 
     def solve(self, problem: MultibodyProblem) -> Solution:
@@ -767,6 +774,7 @@ class CompiledSolver(Solver):
 
     name = "compiled"
     formulation = "index-1 ODE with Baumgarte stabilization, compiled; outputs projected"
+    stabilization = 10.0
     order = "1-12 (variable-order Adams-Moulton, SUNDIALS CVODE)"
     requirements = "the C backend, constant parameters and a C compiler"
     #: CVODE's tolerances are the requested ones divided by this (see above).
@@ -862,6 +870,7 @@ class SwitchingSolver(Solver):
     order = "1-12 (Adams-Moulton) away from singular configurations, 2 (trapezoidal) near them"
     requirements = Index3Solver.requirements
     supports = staticmethod(Index3Solver.supports)
+    stabilization = CompiledSolver.stabilization
 
     def solve(self, problem: MultibodyProblem) -> Solution:
         _require(self, problem.model)
@@ -970,8 +979,17 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         Initial coordinates and velocities.  They should satisfy the
         constraints (``model.assemble`` finds such values); they are projected
         onto ``Phi(q) = 0``, ``Phi_q qd = 0``, ``A qd + b = 0`` before starting.
-    method : {'auto', 'baumgarte', 'projection', 'ggl', 'compiled'}
+    method : {'auto', 'switching', 'ali3p', 'compiled', 'baumgarte', 'projection', 'ggl'}
         Formulation and integrator:
+
+        ``'switching'``
+            ``'compiled'`` away from singular configurations, ``'ali3p'``
+            through them (and throughout when the constraints are redundant at
+            the start) (:class:`SwitchingSolver`);
+        ``'ali3p'``
+            index-3 augmented Lagrangian with mass-orthogonal projections,
+            trapezoidal rule, compiled (:class:`Index3Solver`): passes singular
+            configurations and handles redundant constraints;
 
         ``'baumgarte'``
             index-1 ODE ``[q, qd]' = [qd, qdd]`` with ``qdd`` from
@@ -989,15 +1007,20 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
             outputs projected (:class:`CompiledSolver`; needs a model with the
             C backend and no time-varying parameter);
         ``'auto'``
-            ``'compiled'`` when the model allows it, else ``'projection'``.
+            the first of :data:`AUTO_PREFERENCE` (``'switching'``,
+            ``'compiled'``, ``'projection'``) that the model allows.
+
+        The index-1 methods stop with status -1 at the approach to a singular
+        configuration, where they cannot tell the branches of the motion apart.
     rtol, atol : float
         Relative and absolute local error tolerances.
     t_eval : array_like, shape (K,), optional
         Increasing output times within ``t_span``; by default every accepted step.
     alpha, beta : float, optional
-        Baumgarte parameters (units 1/time).  Default 10 for ``'baumgarte'`` and
-        ``'compiled'``, 0 for ``'projection'`` (projection removes the drift);
-        unused by ``'ggl'``.
+        Baumgarte parameters (units 1/time).  Default: the method's
+        ``stabilization`` (10 for ``'baumgarte'``, ``'compiled'`` and the CVODE
+        part of ``'switching'``, 0 for ``'projection'``, which removes the drift);
+        unused by ``'ggl'`` and ``'ali3p'``.
     max_step : float, optional
         Largest step size (unbounded by default).
     max_steps : int, optional
@@ -1011,7 +1034,8 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
     Trajectory
         ``t`` (N,), ``q``, ``qd``, ``qdd`` (N, m), ``lam`` (N, r), ``mu`` (N, s),
         energies, residuals ``Phi(q)`` (N, r) and ``[Phi_q qd; A qd + b]``
-        (N, r + s), counters and wall time.  On failure (a singular
+        (N, r + s), counters, wall time and ``events`` (the singular
+        configurations passed).  On failure (a singular
         configuration, an integrator error, ``max_steps``) ``status`` is -1,
         ``message`` says why, and the arrays hold the solution up to the failure.
 
@@ -1036,7 +1060,7 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
     if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 1):
         raise ValueError(f"max_steps must be an integer >= 1, got {max_steps!r}")
     name = _resolve_method(method, model)
-    default_stabilization = 10.0 if name in (BaumgarteSolver.name, CompiledSolver.name) else 0.0
+    default_stabilization = METHODS[name].stabilization
     options = SolverOptions(rtol=rtol, atol=atol, max_step=np.inf if max_step is None else float(max_step),
                             max_steps=int(max_steps), progress=progress)
     start = MultibodyProblem(model=model, t0=t0, t1=t1, q0=np.asarray(q0, dtype=float).ravel(),
