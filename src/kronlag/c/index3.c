@@ -179,17 +179,18 @@ static int kl3_step(kl3_state *s, double t, double h, const double *q0, const do
     return 0;
 }
 
-/* Outputs at the state (t, q, v, a): y = [q, v], qdd, the multipliers, kinetic and potential
+/* Outputs at the state (t, q, v, a) (current: s->terms already hold its kernel values): y = [q, v],
+ * qdd, the multipliers, kinetic and potential
  * energy, Phi (r) and Phi_q v (r).  The multipliers are the least-squares solution of
  * Phi_q^T lam = f_Q - C v - g - M a (the iteration's lam* + alpha Phi carries the rounding of
  * Phi times alpha). */
-static void kl3_output(kl3_state *s, int row, double t, const double *q, const double *v, const double *a,
-                       double *t_out, double *y_out, double *qdd_out, double *lam_out, double *energies,
-                       double *phi_out, double *velocity_out)
+static void kl3_output(kl3_state *s, int row, int current, double t, const double *q, const double *v,
+                       const double *a, double *t_out, double *y_out, double *qdd_out, double *lam_out,
+                       double *energies, double *phi_out, double *velocity_out)
 {
     enum { m = KL3_M, r = KL3_R };
     double potential, forces[m], lam[r + 1];
-    kronlag_dynamics(t, q, v, s->p, s->terms);
+    if (!current) kronlag_dynamics(t, q, v, s->p, s->terms);  /* else s->terms are those of (t, q, v) */
     for (int i = 0; i < m; ++i) {
         double sum = s->terms[KRONLAG_DYNAMICS_H + i];
         for (int j = 0; j < m; ++j) sum -= s->terms[KRONLAG_DYNAMICS_M + i * m + j] * a[j];
@@ -263,10 +264,10 @@ int kronlag_index3(const double *p, int n_parameters, double t0, double t1, cons
     long steps = 0, rejected = 0;
     double t = t0;
     if (n_eval == 0) {
-        kl3_output(&s, rows++, t0, q, v, a, t_out, y_out, qdd_out, lam_out, energies, phi_out, velocity_out);
+        kl3_output(&s, rows++, 0, t0, q, v, a, t_out, y_out, qdd_out, lam_out, energies, phi_out, velocity_out);
     } else {
         for (; next < n_eval && t_eval[next] <= t0; ++next)
-            kl3_output(&s, rows++, t_eval[next], q, v, a, t_out, y_out, qdd_out, lam_out, energies, phi_out,
+            kl3_output(&s, rows++, 0, t_eval[next], q, v, a, t_out, y_out, qdd_out, lam_out, energies, phi_out,
                        velocity_out);
     }
     if (!(s.mass_scale > 0.0)) { flag = KL3_START_FAILED; goto done; }
@@ -295,7 +296,7 @@ int kronlag_index3(const double *p, int n_parameters, double t0, double t1, cons
         double ratio = kl_monitor_observe(&monitor, t_new, qn, s.terms + KRONLAG_DYNAMICS_PHI_Q);
         if (n_eval == 0) {
             if (rows == max_rows) { flag = KL3_OUTPUTS_FULL; break; }
-            kl3_output(&s, rows++, t_new, qn, vn, an, t_out, y_out, qdd_out, lam_out, energies, phi_out,
+            kl3_output(&s, rows++, 1, t_new, qn, vn, an, t_out, y_out, qdd_out, lam_out, energies, phi_out,
                        velocity_out);
         } else {
             for (; next < n_eval && t_eval[next] <= t_new; ++next) {
@@ -307,7 +308,7 @@ int kronlag_index3(const double *p, int n_parameters, double t0, double t1, cons
                     vi[i] = h00 * v[i] + h10 * h * a[i] + h01 * vn[i] + h11 * h * an[i];
                     ai[i] = (1 - theta) * a[i] + theta * an[i];
                 }
-                kl3_output(&s, rows++, t_eval[next], qi, vi, ai, t_out, y_out, qdd_out, lam_out, energies,
+                kl3_output(&s, rows++, 0, t_eval[next], qi, vi, ai, t_out, y_out, qdd_out, lam_out, energies,
                            phi_out, velocity_out);
             }
         }
