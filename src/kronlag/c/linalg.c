@@ -88,19 +88,6 @@ static void lu_solve(const double *a, int n, const int *piv, double *x)
     }
 }
 
-/* |diag R| of the column-pivoted QR of G^T, G = rows x m (row-major), in decreasing order:
- * the rank-revealing magnitudes that tolerances.py speaks of.  perm[i] is the constraint row
- * behind magnitudes[i]. */
-static void rank_magnitudes(const double *G, int rows, int m, double *magnitudes, int *perm)
-{
-    double X[m * (rows + 1)], tau[rows + 1];
-    for (int i = 0; i < m; ++i)
-        for (int j = 0; j < rows; ++j) X[i * rows + j] = G[j * m + i];
-    house_qr(X, m, rows, rows, perm, tau);
-    int steps = m < rows ? m : rows;
-    for (int j = 0; j < rows; ++j) magnitudes[j] = j < steps ? fabs(X[j * rows + j]) : 0.0;
-}
-
 /* Number of magnitudes above KRONLAG_RANK_RTOL times the first (the largest). */
 static int rank_of(const double *magnitudes, int n)
 {
@@ -109,19 +96,36 @@ static int rank_of(const double *magnitudes, int n)
     return rank;
 }
 
-/* x <- x - dx, dx the least-norm solution of G dx = residual for the rows x m matrix G
- * (row-major), over its independent rows (rank_of of the pivoted QR of G^T): redundant rows are
- * dropped, and for a consistent residual they are met as well.  Returns the rank. */
-static int min_norm_correction(const double *G, int rows, int m, const double *residual, double *x)
+/* Column-pivoted Householder QR of G^T (G: rows x m, row-major) into X (m x rows), tau, perm, and
+ * the magnitudes |diag R| (rows; 0 past min(m, rows)), decreasing: the rank-revealing factorization
+ * of the rank policy (tolerances.py).  Returns the rank (rank_of). */
+static int pivoted_qr_transpose(const double *G, int rows, int m, double *X, double *tau, int *perm,
+                                double *magnitudes)
 {
-    double X[m * (rows + 1)], tau[rows + 1], magnitudes[rows + 1], y[m];
-    int perm[rows + 1];
     for (int i = 0; i < m; ++i)
         for (int j = 0; j < rows; ++j) X[i * rows + j] = G[j * m + i];
     house_qr(X, m, rows, rows, perm, tau);
     int steps = m < rows ? m : rows;
-    for (int j = 0; j < steps; ++j) magnitudes[j] = fabs(X[j * rows + j]);
-    int rank = rank_of(magnitudes, steps);
+    for (int j = 0; j < rows; ++j) magnitudes[j] = j < steps ? fabs(X[j * rows + j]) : 0.0;
+    return rank_of(magnitudes, steps);
+}
+
+/* |diag R| of the column-pivoted QR of G^T (G: rows x m) in decreasing order, and perm[i], the
+ * constraint row behind magnitudes[i]. */
+static void rank_magnitudes(const double *G, int rows, int m, double *magnitudes, int *perm)
+{
+    double X[m * (rows + 1)], tau[rows + 1];
+    pivoted_qr_transpose(G, rows, m, X, tau, perm, magnitudes);
+}
+
+/* x <- x - dx, dx the least-norm solution of G dx = residual for the rows x m matrix G
+ * (row-major), over its independent rows: redundant rows are dropped, and for a consistent
+ * residual they are met as well.  Returns the rank. */
+static int min_norm_correction(const double *G, int rows, int m, const double *residual, double *x)
+{
+    double X[m * (rows + 1)], tau[rows + 1], magnitudes[rows + 1], y[m];
+    int perm[rows + 1];
+    int rank = pivoted_qr_transpose(G, rows, m, X, tau, perm, magnitudes);
     /* P^T G = R^T Q^T: R1^T y1 = (P^T residual)[:rank] (forward substitution), y2 = 0, dx = Q y. */
     for (int i = 0; i < m; ++i) y[i] = 0.0;
     for (int i = 0; i < rank; ++i) {
@@ -135,18 +139,13 @@ static int min_norm_correction(const double *G, int rows, int m, const double *r
 }
 
 /* The least-squares solution lam (rows) of G^T lam = b for the rows x m matrix G (row-major), over
- * its independent rows (rank_of of the pivoted QR of G^T; the others get 0): the multipliers that
- * balance the forces b.  Returns the rank. */
+ * its independent rows (the others get 0): the multipliers that balance the forces b.  Returns the
+ * rank. */
 static int least_squares_transpose(const double *G, int rows, int m, const double *b, double *lam)
 {
     double X[m * (rows + 1)], tau[rows + 1], magnitudes[rows + 1], y[m], solution[rows + 1];
     int perm[rows + 1];
-    for (int i = 0; i < m; ++i)
-        for (int j = 0; j < rows; ++j) X[i * rows + j] = G[j * m + i];
-    house_qr(X, m, rows, rows, perm, tau);
-    int steps = m < rows ? m : rows;
-    for (int j = 0; j < steps; ++j) magnitudes[j] = fabs(X[j * rows + j]);
-    int rank = rank_of(magnitudes, steps);
+    int rank = pivoted_qr_transpose(G, rows, m, X, tau, perm, magnitudes);
     memcpy(y, b, m * sizeof(double));
     for (int j = 0; j < rank; ++j) house_apply(X, m, rows, j, tau[j], y, 1);   /* y = Q^T b */
     for (int i = rank - 1; i >= 0; --i) {                                        /* R1 s = y1 */
