@@ -572,7 +572,7 @@ def _driver_library(source: str) -> ctypes.CDLL:
 #: monitor), its C file, its entry point and the argument types of the entry point.
 _P, _D, _I, _L = ctypes.c_void_p, ctypes.c_double, ctypes.c_int, ctypes.c_long
 _DRIVERS = {
-    "cvode": (("potential_energy",), "cvode.c", "kronlag_cvode",
+    "cvode": (("potential_energy", "Phi_q"), "cvode.c", "kronlag_cvode",
               [_P, _D, _D, _P, _I, _P, _D, _D, _D, _D, _D, _L, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _PROGRESS]),
     "index3": (("tangent", "potential_energy"), "index3.c", "kronlag_index3",
                [_P, _I, _D, _D, _P, _P, _P, _I, _P, _D, _D, _D, _D, _L, _I, _I] + [_P] * 10
