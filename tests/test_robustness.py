@@ -85,7 +85,7 @@ def test_failed_runs_have_equal_length_arrays(method):
     model, q0, qd0 = four_bar()
     trajectory = kronlag.simulate(model, (0.0, 100.0), q0, qd0, method=method, max_steps=5,
                                   t_eval=np.linspace(0.0, 100.0, 7))
-    assert trajectory.status == -1
+    assert trajectory.status == -1 and trajectory.result is kronlag.Result.MAX_STEPS
     n = len(trajectory.t)
     for name in ("q", "qd", "qdd", "lam", "kinetic_energy", "potential_energy", "position_residual",
                  "velocity_residual"):
@@ -98,7 +98,7 @@ def test_gimbal_lock_is_named_as_a_singular_configuration():
     model = derived("heavy_top").numeric(dict(m=1.0, l=0.1, g=9.81, Ixx=0.01, Izz=0.02))
     q0, qd0 = np.array([0.0, 1e-9, 0.0]), np.array([0.0, 0.5, 0.0])
     trajectory = kronlag.simulate(model, (0.0, 1.0), q0, qd0, method="compiled")
-    assert trajectory.status == -1
+    assert trajectory.status == -1 and trajectory.result is kronlag.Result.SINGULAR
     assert "singular configuration" in trajectory.message and "t = " in trajectory.message
     assert "q = [" in trajectory.message
 
@@ -130,10 +130,11 @@ def test_index1_methods_stop_at_the_approach_and_the_default_passes():
     q0, qd0 = benchmark.initial_state(model)
     for method in ("compiled", "projection"):
         trajectory = kronlag.simulate(model, (0.0, 2.0), q0, qd0, method=method)
-        assert trajectory.status == -1 and "approaches a singular configuration" in trajectory.message
+        assert trajectory.status == -1 and trajectory.result is kronlag.Result.APPROACH
+        assert "approaches a singular configuration" in trajectory.message
         assert trajectory.t[-1] < 0.72 and len(trajectory.events) == 1
     trajectory = kronlag.simulate(model, (0.0, 2.0), q0, qd0)
-    assert trajectory.success and trajectory.method == "switching"
+    assert trajectory.success and trajectory.method == "switching" and trajectory.result is kronlag.Result.SUCCESS
     # two passages in 2 s (all bars horizontal at t ~ 0.71 s and 1.23 s), named by their constraints
     assert len(trajectory.events) == 2
     for event, expected in zip(trajectory.events, (0.714, 1.229)):

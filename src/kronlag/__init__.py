@@ -22,7 +22,7 @@ from .numeric import (
 )
 from .simulation import simulate
 from .sweeps import SweepResult, sweep
-from .trajectory import SingularPassage, Trajectory
+from .trajectory import Result, SingularPassage, Trajectory
 from .reactions import Reaction
 from .joints import FreeBody, Joint, free_body, mechanism
 from .frames import Frame
@@ -81,6 +81,7 @@ __all__ = [
     "simulate",
     "Trajectory",
     "SingularPassage",
+    "Result",
     "Equilibrium",
     "EquilibriumError",
     "LinearModel",

@@ -638,105 +638,6 @@ def c_kernel(kernel: Kernel, first_chunk: int) -> tuple[str, int]:
     return "\n".join(lines) + "\n", len(names)
 
 
-#: Threads start and end within a call (no pool survives a fork).
-C_BATCH = r"""
-#if KRONLAG_IN_PART(0)
-#include <pthread.h>
-#define KRONLAG_MAX_THREADS 64
-#define KRONLAG_MIN_STATES_PER_THREAD 256
-typedef void (*kronlag_range_work)(const void *job, long begin, long end);
-struct kronlag_range { kronlag_range_work work; const void *job; long begin, end; };
-
-static void *kronlag_run_range(void *argument)
-{
-    const struct kronlag_range *range = argument;
-    range->work(range->job, range->begin, range->end);
-    return NULL;
-}
-
-static void kronlag_parallel(kronlag_range_work work, const void *job, long n, int threads)
-{
-    if (threads > KRONLAG_MAX_THREADS) threads = KRONLAG_MAX_THREADS;
-    if (threads > n / KRONLAG_MIN_STATES_PER_THREAD) threads = (int)(n / KRONLAG_MIN_STATES_PER_THREAD);
-    if (threads < 2) {
-        work(job, 0, n);
-        return;
-    }
-    pthread_t handles[KRONLAG_MAX_THREADS];
-    struct kronlag_range ranges[KRONLAG_MAX_THREADS];
-    int started[KRONLAG_MAX_THREADS];
-    for (int k = 0; k < threads; ++k) {
-        ranges[k] = (struct kronlag_range){work, job, n * k / threads, n * (k + 1) / threads};
-        started[k] = k > 0 && pthread_create(&handles[k], NULL, kronlag_run_range, &ranges[k]) == 0;
-    }
-    for (int k = 0; k < threads; ++k)
-        if (!started[k]) kronlag_run_range(&ranges[k]);
-    for (int k = 1; k < threads; ++k)
-        if (started[k]) pthread_join(handles[k], NULL);
-}
-
-typedef void (*kronlag_kernel_function)(double t, const double *q, const double *qd, const double *p, double *out);
-struct kronlag_kernel_job {
-    kronlag_kernel_function kernel;
-    long m, size, t_step, qd_step, p_step;
-    const double *t, *q, *qd, *p;
-    double *out;
-};
-
-static void kronlag_kernel_range(const void *argument, long begin, long end)
-{
-    const struct kronlag_kernel_job *job = argument;
-    for (long i = begin; i < end; ++i)
-        job->kernel(job->t[i * job->t_step], job->q + i * job->m, job->qd + i * job->qd_step,
-                    job->p + i * job->p_step, job->out + i * job->size);
-}
-
-void kronlag_kernel_batch(kronlag_kernel_function kernel, long n, long m, long size, const double *t, long t_step,
-                          const double *q, const double *qd, long qd_step, const double *p, long p_step,
-                          double *out, int threads)
-{
-    struct kronlag_kernel_job job = {kernel, m, size, t_step, qd_step, p_step, t, q, qd, p, out};
-    kronlag_parallel(kronlag_kernel_range, &job, n, threads);
-}
-#endif
-"""
-
-#: Batched forward dynamics, appended after the solver (``src/kronlag/c/augmented.c``): ``kronlag_forward_dynamics_packed``
-#: at ``n`` states, writing ``[qdd, lam, mu]`` (m + r + s) per state and its rank (-1: singular).
-C_FORWARD_DYNAMICS_BATCH = r"""
-struct kronlag_forward_job {
-    long n_parameters, t_step, p_step;
-    const double *t, *q, *qd, *p;
-    double alpha, beta;
-    double *out;
-    int *rank;
-};
-
-static void kronlag_forward_range(const void *argument, long begin, long end)
-{
-    const struct kronlag_forward_job *job = argument;
-    double in[3 + 2 * KRONLAG_M + job->n_parameters];
-    in[1] = job->alpha;
-    in[2] = job->beta;
-    for (long i = begin; i < end; ++i) {
-        in[0] = job->t[i * job->t_step];
-        memcpy(in + 3, job->q + i * KRONLAG_M, KRONLAG_M * sizeof(double));
-        memcpy(in + 3 + KRONLAG_M, job->qd + i * KRONLAG_M, KRONLAG_M * sizeof(double));
-        memcpy(in + 3 + 2 * KRONLAG_M, job->p + i * job->p_step, job->n_parameters * sizeof(double));
-        job->rank[i] = kronlag_forward_dynamics_packed(in, job->out + i * (KRONLAG_M + KRONLAG_K));
-    }
-}
-
-void kronlag_forward_dynamics_batch(long n, long n_parameters, const double *t, long t_step, const double *q,
-                                    const double *qd, const double *p, long p_step, double alpha, double beta,
-                                    double *out, int *rank, int threads)
-{
-    struct kronlag_forward_job job = {n_parameters, t_step, p_step, t, q, qd, p, alpha, beta, out, rank};
-    kronlag_parallel(kronlag_forward_range, &job, n, threads);
-}
-"""
-
-
 def batch_threads() -> int:
     """Threads of a batched C call: ``$KRONLAG_THREADS``, else the CPUs this process may use."""
     configured = os.environ.get("KRONLAG_THREADS", "").strip()
@@ -767,7 +668,7 @@ class CLibrary:
     Single calls go through :data:`FAST_CALL` (arrays read in place), else through
     :mod:`ctypes` with per-call buffers (so both are safe from several threads);
     batched calls through :mod:`ctypes` (which releases the GIL) into
-    :data:`C_BATCH`.  With a ``"dynamics"`` kernel the library also holds the
+    ``src/kronlag/c/kernel_batch.c``.  With a ``"dynamics"`` kernel the library also holds the
     solver of the augmented system (``src/kronlag/c/augmented.c``).
     """
 
@@ -779,13 +680,13 @@ class CLibrary:
             code, count = c_kernel(kernel, chunks)
             parts.append(code)
             chunks += count
-        parts.append(C_BATCH)
+        parts.append(c_file("kernel_batch.c"))
         solver = "dynamics" in self.kernels
         if solver:
             self.shape = dynamics_shape(self.kernels["dynamics"])
             m, r, s = self.shape
             parts.append("#if KRONLAG_IN_PART(0)\n" + solver_header(m, r, s, rank_rtol))
-            parts.append(c_file("linalg.c") + c_file("augmented.c") + C_FORWARD_DYNAMICS_BATCH + "#endif\n")
+            parts.append(c_file("linalg.c") + c_file("augmented.c") + c_file("forward_dynamics_batch.c") + "#endif\n")
         self.source = "\n".join(parts)
         self.path = compile_shared_library(self.source, parts=min(chunks, os.cpu_count() or 1, 8))
         self.library = ctypes.CDLL(str(self.path))

@@ -31,7 +31,7 @@ from scipy.integrate import DOP853
 from . import codegen
 from .numeric import AssemblyError, SingularConfigurationError, least_norm
 from .tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
-from .trajectory import SingularPassage, Trajectory
+from .trajectory import Result, SingularPassage, Trajectory
 
 if TYPE_CHECKING:
     from .numeric import NumericModel
@@ -51,6 +51,7 @@ __all__ = [
     "Index3Solver",
     "SwitchingSolver",
     "InitialStateWarning",
+    "Result",
     "AUTO_PREFERENCE",
 ]
 
@@ -59,7 +60,7 @@ class ProjectionError(RuntimeError):
     """The projection onto the constraint manifold did not converge."""
 
 
-_SUCCESS = "The integration reached the end of the time span."
+_SUCCESS = Result.SUCCESS.value
 #: Failures of the model evaluation that end an integration (partial results are returned).
 _FAILURES = (SingularConfigurationError, ProjectionError, np.linalg.LinAlgError, FloatingPointError)
 #: Most Gauss-Newton iterations of one position projection.
@@ -175,6 +176,8 @@ class Solution:
         (N, r + s) at the outputs, when the solver computed them (else :func:`simulate` does).
     events : tuple of SingularPassage
         Singular configurations passed.
+    result : Result
+        How it ended (``status`` is ``result.status``).
     """
 
     t: np.ndarray
@@ -186,6 +189,7 @@ class Solution:
     steps: int
     derived: dict[str, np.ndarray] | None = None
     events: tuple[SingularPassage, ...] = ()
+    result: Result = Result.SUCCESS
 
 
 @dataclass(frozen=True)
@@ -291,9 +295,7 @@ class _ApproachWatch:
 
 
 def _approach_text(t: float, q: np.ndarray) -> str:
-    return (f"Stopped at t = {t:.6g}, q = {np.array2string(q, precision=6)}: the motion approaches a "
-            "singular configuration (Phi_q nearly loses rank), where an index-1 formulation cannot tell the "
-            "branches of the motion apart; method='ali3p' or 'switching' (the default) passes it")
+    return f"Stopped at t = {t:.6g}, q = {np.array2string(q, precision=6)}: {Result.APPROACH.value}"
 
 
 def _march(make_stepper: Callable[[], _Stepper], problem: MultibodyProblem, options: SolverOptions) -> Solution:
@@ -314,20 +316,20 @@ def _march(make_stepper: Callable[[], _Stepper], problem: MultibodyProblem, opti
     initial = 1 if every_step else pending  # outputs at t0 are the initial state
     times += [problem.t0] * initial
     states += [problem.y0] * initial
-    steps, status, message, events = 0, 0, _SUCCESS, ()
+    steps, result, message, events = 0, Result.SUCCESS, _SUCCESS, ()
     stepper = None
     try:
         watch = _ApproachWatch(problem)
         stepper = make_stepper()
         while stepper.t < problem.t1:
             if steps >= options.max_steps:
-                status, message = -1, (f"Reached the maximum number of steps ({options.max_steps}) "
-                                       f"at t = {stepper.t:.6g}.")
+                result, message = Result.MAX_STEPS, (f"Integration stopped at t = {stepper.t:.6g}: "
+                                                     f"{Result.MAX_STEPS.value} ({options.max_steps})")
                 break
             stepper.limit_step(min(options.max_step, watch.max_step()))
             failure = stepper.step()
             if failure is not None:
-                status, message = -1, f"Integration failed at t = {stepper.t:.6g}: {failure}"
+                result, message = Result.SOLVER_FAILED, f"Integration failed at t = {stepper.t:.6g}: {failure}"
                 break
             steps += 1
             if every_step:
@@ -342,14 +344,16 @@ def _march(make_stepper: Callable[[], _Stepper], problem: MultibodyProblem, opti
                 options.progress(stepper.t)
             approach = watch.observe(stepper.t, stepper.y)
             if approach is not None:
-                status, message, events = -1, _approach_text(stepper.t, approach.q), (approach,)
+                result, message, events = Result.APPROACH, _approach_text(stepper.t, approach.q), (approach,)
                 break
     except _FAILURES as error:
         where = stepper.t if stepper is not None else problem.t0
-        status, message = -1, f"Integration failed at t = {where:.6g}: {type(error).__name__}: {error}"
+        result = Result.SINGULAR if isinstance(error, SingularConfigurationError) else Result.SOLVER_FAILED
+        message = f"Integration failed at t = {where:.6g}: {type(error).__name__}: {error}"
     nfev, njev = stepper.counters() if stepper is not None else (0, 0)
     return Solution(t=np.asarray(times, dtype=float), y=np.reshape(states, (len(states), 2 * problem.m)),
-                    status=status, message=message, nfev=nfev, njev=njev, steps=steps, events=events)
+                    status=result.status, message=message, nfev=nfev, njev=njev, steps=steps, events=events,
+                    result=result)
 
 
 class _ScipyStepper(_Stepper):
@@ -721,35 +725,42 @@ def _index3_segment(problem: MultibodyProblem, options: SolverOptions, t0: float
                     t_end=t_end.value, y_end=y_end, steps=int(stats[0]), nfev=int(stats[2]), njev=int(stats[3]))
 
 
-#: Failure flags of the C drivers (``src/kronlag/c/index3.c``; CVODE's own flags are named by
-#: ``kronlag_cvode_flag_name``) and what they mean.
-_INDEX3_FAILURES = {
-    -1: "reached the maximum number of steps ({max_steps})",
-    -2: "the step size fell below the smallest step (error test failures)",
-    -3: "Newton's method did not converge at the smallest step",
-    -4: "the velocities jump at a singular configuration: the motion would leave its branch",
-    -6: "the mass matrix is zero at the start",
-    -7: "more steps than output rows: pass t_eval to choose the outputs",
+#: The flags of the C drivers (``src/kronlag/c/cvode.c``, ``index3.c``) that are not CVODE's own:
+#: what each means.
+_DRIVER_RESULTS = {
+    "cvode": {-1: Result.MAX_STEPS, 2: Result.APPROACH, -1002: Result.PROJECTION_FAILED,
+              -1003: Result.SINGULAR, -1004: Result.OUTPUTS_FULL},
+    "index3": {-1: Result.MAX_STEPS, -2: Result.STEP_TOO_SMALL, -3: Result.NEWTON_FAILED,
+               -4: Result.BRANCH_LOST, -6: Result.SINGULAR, -7: Result.OUTPUTS_FULL},
 }
 #: Most rows allocated for outputs at every step (``t_eval`` None): a longer run needs ``t_eval``.
 _MAX_STEP_ROWS = 1_000_000
 
 
-def _failure_message(segment: _Segment, model: NumericModel, reason: str) -> str:
-    """``Integration failed at t = ..., q = ...: reason[; the nearest singular passage]``."""
+def _segment_status(segment: _Segment, model: NumericModel, kind: str) -> tuple[Result, str]:
+    """The :class:`Result` of a driver's ``segment`` and the message: ``Integration failed at t = ...,
+    q = ...: reason[; the last singular passage]``."""
+    if segment.flag == 0:
+        return Result.SUCCESS, _SUCCESS
     q = segment.y_end[:model.m]
+    result = _DRIVER_RESULTS[kind].get(segment.flag, Result.SOLVER_FAILED)
+    if result is Result.APPROACH:
+        return result, _approach_text(segment.t_end, q)
+    reason = result.value
+    if result is Result.SOLVER_FAILED:
+        reason = f"CVODE {_driver(model, 'cvode').kronlag_cvode_flag_name(segment.flag).decode()} ({segment.flag})"
     message = f"Integration failed at t = {segment.t_end:.6g}, q = {np.array2string(q, precision=6)}: {reason}"
-    return message + (f"; last passage: {segment.events[-1]}" if segment.events else "")
+    return result, message + (f"; last passage: {segment.events[-1]}" if segment.events else "")
 
 
-def _solution(segments: Sequence[_Segment], status: int, message: str) -> Solution:
+def _solution(segments: Sequence[_Segment], result: Result, message: str) -> Solution:
     """The :class:`Solution` of consecutive segments."""
     derived = {key: np.concatenate([segment.derived[key] for segment in segments]) for key in segments[0].derived}
     return Solution(t=np.concatenate([segment.t for segment in segments]),
-                    y=np.concatenate([segment.y for segment in segments]), status=status, message=message,
+                    y=np.concatenate([segment.y for segment in segments]), status=result.status, message=message,
                     nfev=sum(segment.nfev for segment in segments), njev=sum(segment.njev for segment in segments),
                     steps=sum(segment.steps for segment in segments), derived=derived,
-                    events=tuple(event for segment in segments for event in segment.events))
+                    events=tuple(event for segment in segments for event in segment.events), result=result)
 
 
 class CompiledSolver(Solver):
@@ -800,15 +811,7 @@ class CompiledSolver(Solver):
         if segment.flag == 2:  # the approach is an event too
             approach = _ApproachWatch(problem).observe(segment.t_end, segment.y_end)
             segment = replace(segment, events=segment.events + ((approach,) if approach else ()))
-        return _solution([segment], *self._status(segment, problem.model))
-
-    def _status(self, segment: _Segment, model: NumericModel) -> tuple[int, str]:
-        if segment.flag == 0:
-            return 0, _SUCCESS
-        if segment.flag == 2:
-            return -1, _approach_text(segment.t_end, segment.y_end[:model.m])
-        name = _driver(model, "cvode").kronlag_cvode_flag_name(segment.flag).decode()
-        return -1, _failure_message(segment, model, f"CVODE {name} ({segment.flag})")
+        return _solution([segment], *_segment_status(segment, problem.model, "cvode"))
 
 
 def _require(solver: Solver, model: NumericModel) -> None:
@@ -853,13 +856,7 @@ class Index3Solver(Solver):
     def solve(self, problem: MultibodyProblem) -> Solution:
         _require(self, problem.model)
         segment = _index3_segment(problem, self.options, problem.t0, problem.y0, handback=False)
-        return _solution([segment], *_index3_status(segment, problem.model, self.options))
-
-
-def _index3_status(segment: _Segment, model: NumericModel, options: SolverOptions) -> tuple[int, str]:
-    if segment.flag == 0:
-        return 0, _SUCCESS
-    return -1, _failure_message(segment, model, _INDEX3_FAILURES[segment.flag].format(max_steps=options.max_steps))
+        return _solution([segment], *_segment_status(segment, problem.model, "index3"))
 
 
 class SwitchingSolver(Solver):
@@ -897,12 +894,8 @@ class SwitchingSolver(Solver):
             else:
                 segment = _cvode_segment(problem, budget, t, y)
             segments.append(segment.without_first_row() if segments and problem.t_eval is None else segment)
-            if segment.flag == 0:
-                return _solution(segments, 0, _SUCCESS)
-            if segment.flag < 0:
-                status = (_index3_status(segment, model, options) if index3 else
-                          CompiledSolver(options)._status(segment, model))
-                return _solution(segments, *status)
+            if segment.flag <= 0:
+                return _solution(segments, *_segment_status(segment, model, "index3" if index3 else "cvode"))
             t, y, index3 = segment.t_end, segment.y_end, not index3
 
 
@@ -963,7 +956,7 @@ def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, star
                       coordinate_names=tuple(model.coordinate_names), model=model,
                       method=method, status=solution.status, message=solution.message, nfev=solution.nfev,
                       njev=solution.njev, steps=solution.steps, wall_time=time.perf_counter() - started,
-                      events=solution.events)
+                      events=solution.events, result=solution.result)
 
 
 def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, method: str = "auto",

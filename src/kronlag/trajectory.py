@@ -10,6 +10,7 @@ with time along the first axis of every array, and exports it as columns.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 from functools import cached_property
 from os import PathLike
@@ -23,7 +24,33 @@ from .reactions import Reaction, joint_reaction, plot_reactions, reaction_column
 if TYPE_CHECKING:
     from .numeric import NumericModel
 
-__all__ = ["Trajectory", "SingularPassage"]
+__all__ = ["Trajectory", "SingularPassage", "Result"]
+
+
+class Result(enum.Enum):
+    """How an integration ended; the value is the message (``Trajectory.message`` adds where).
+
+    ``status`` is 0 for :attr:`SUCCESS` and -1 for every other result.
+    """
+
+    SUCCESS = "The integration reached the end of the time span."
+    MAX_STEPS = "reached the maximum number of steps"
+    APPROACH = ("the motion approaches a singular configuration (Phi_q nearly loses rank), where an "
+                "index-1 formulation cannot tell the branches of the motion apart; method='ali3p' or "
+                "'switching' (the default) passes it")
+    SINGULAR = ("singular configuration: M is not positive definite on the null space of [Phi_q; A], the "
+                "accelerations are not determined (e.g. Euler angles at gimbal lock)")
+    STEP_TOO_SMALL = "the step size fell below the smallest step (error test failures)"
+    NEWTON_FAILED = "Newton's method did not converge at the smallest step"
+    BRANCH_LOST = "the velocities jump at a singular configuration: the motion would leave its branch"
+    PROJECTION_FAILED = "the projection onto the constraints failed"
+    OUTPUTS_FULL = "more steps than output rows: pass t_eval to choose the outputs"
+    SOLVER_FAILED = "the integrator failed"
+
+    @property
+    def status(self) -> int:
+        """0 for success, -1 otherwise."""
+        return 0 if self is Result.SUCCESS else -1
 
 
 @dataclass(frozen=True)
@@ -99,6 +126,8 @@ class Trajectory:
         Seconds spent in :func:`kronlag.simulate`.
     events : tuple of SingularPassage
         Passages through or near singular configurations, in time order.
+    result : Result
+        How the integration ended (``status`` is ``result.status``).
 
     Notes
     -----
@@ -133,6 +162,7 @@ class Trajectory:
     steps: int
     wall_time: float
     events: tuple[SingularPassage, ...] = ()
+    result: Result = Result.SUCCESS
 
     @property
     def success(self) -> bool:
