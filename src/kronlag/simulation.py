@@ -550,6 +550,8 @@ _SUNDIALS_LIBRARIES = ("sundials_core", "sundials_nvecserial", "sundials_sunmatr
 _PROGRESS = ctypes.CFUNCTYPE(None, ctypes.c_double)
 #: Most singular passages stored per run segment (more are counted).
 _MAX_EVENTS = 1000
+#: Most rows allocated for outputs at every step (``t_eval`` None): a longer run needs ``t_eval``.
+_MAX_STEP_ROWS = 1_000_000
 
 
 def _load_sundials() -> None:
@@ -657,8 +659,7 @@ def _cvode_segment(problem: MultibodyProblem, options: SolverOptions, t0: float,
     model = problem.model
     library = _driver(model, "cvode")
     times, rows = _output_rows(problem, t0, options)
-    every_step = problem.t_eval is None
-    t_out, y_out = np.empty(rows + every_step), np.empty((rows + every_step, 2 * problem.m))
+    t_out, y_out = np.empty(rows), np.empty((rows, 2 * problem.m))
     written, event_count, t_end = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(t0)
     stats, events, y_end = np.zeros(4, dtype=np.int64), np.empty((_MAX_EVENTS, 5 + model.m)), np.empty(2 * model.m)
     p, y0 = model.parameter_vector(t0), np.ascontiguousarray(y0, dtype=float)
@@ -697,8 +698,6 @@ def _index3_segment(problem: MultibodyProblem, options: SolverOptions, t0: float
     a0 = np.zeros(m) if start is None else start.qdd
     lam0 = np.zeros(r) if start is None else start.lam
     times, rows = _output_rows(problem, t0, options)
-    every_step = problem.t_eval is None
-    rows += every_step
     t_out, y_out = np.empty(rows), np.empty((rows, 2 * m))
     qdd, lam = np.empty((rows, m)), np.empty((rows, r))
     energies, phi, velocity = np.empty((rows, 2)), np.empty((rows, r)), np.empty((rows, r))
@@ -733,8 +732,7 @@ _DRIVER_RESULTS = {
     "index3": {-1: Result.MAX_STEPS, -2: Result.STEP_TOO_SMALL, -3: Result.NEWTON_FAILED,
                -4: Result.BRANCH_LOST, -6: Result.SINGULAR, -7: Result.OUTPUTS_FULL},
 }
-#: Most rows allocated for outputs at every step (``t_eval`` None): a longer run needs ``t_eval``.
-_MAX_STEP_ROWS = 1_000_000
+
 
 
 def _segment_status(segment: _Segment, model: NumericModel, kind: str) -> tuple[Result, str]:
