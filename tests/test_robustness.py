@@ -141,3 +141,48 @@ def test_index1_methods_stop_at_the_approach_and_the_default_passes():
         assert event.t == pytest.approx(expected, abs=5e-3)
         assert event.ratio < APPROACH_RTOL and event.constraints
     assert benchmark.error(trajectory) < 1e-5
+
+
+@functools.cache
+def parallelogram():
+    """Three parallel cranks (absolute angles th0..th2, pivots 1 m apart, 1 m long, 1 kg, slender) and
+    one rigid coupler (centre x, y, angle phi; 2 m, 2 kg) pinned to the three crank tips: 6 constraints
+    of rank 5 (the middle crank is redundant), one degree of freedom."""
+    import sympy as sp
+
+    from kronlag.models import _bar
+
+    th = kronlag.coordinates("th0 th1 th2")
+    x, y, phi = kronlag.coordinates("x y phi")
+    g = sp.Symbol("g")
+    system = kronlag.System([*th, x, y, phi], parameters=[g], gravity=(0, -g), name="parallelogram")
+    for k in range(3):
+        system.add_body(_bar(f"crank{k}", 1, sp.Rational(1, 12), (k, 0), 1, th[k]))
+    system.add_body(kronlag.PlanarBody("coupler", mass=2, inertia=sp.Rational(2 * 4, 12), position=(x, y),
+                                       angle=phi))
+    for k in range(3):
+        system.add_constraint(k + sp.cos(th[k]) - (x + (k - 1) * sp.cos(phi)), name=f"pin{k} x")
+        system.add_constraint(sp.sin(th[k]) - (y + (k - 1) * sp.sin(phi)), name=f"pin{k} y")
+    return kronlag.derive(system).numeric({"g": 9.81})
+
+
+@pytest.mark.parametrize("method", ["auto", "compiled", "projection"])
+def test_parallelogram_with_a_redundant_crank_swings_like_the_reduced_pendulum(method):
+    # Reduced by hand: th0 = th1 = th2 = th, phi = 0, the coupler translates with the crank tips:
+    # T = 1/2 (3 * m L^2 / 3 + m_c L^2) th'^2 = 3/2 th'^2, V = (3 * m L / 2 + m_c L) g sin th = 3.5 g sin th.
+    from scipy.integrate import solve_ivp
+
+    model = parallelogram()
+    start = -np.pi / 2 + 0.5                                   # far from the horizontal singular positions
+    q0 = np.array([start] * 3 + [1 + np.cos(start), np.sin(start), 0.0])
+    assert np.linalg.matrix_rank(model.Phi_q(q0), tol=1e-8) == 5
+    times = np.linspace(0.0, 5.0, 51)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", kronlag.RedundantConstraintsWarning)
+        trajectory = kronlag.simulate(model, (0.0, 5.0), q0, np.zeros(6), method=method, t_eval=times)
+    reference = solve_ivp(lambda t, y: [y[1], -3.5 * 9.81 * np.cos(y[0]) / 3.0], (0.0, 5.0), [start, 0.0],
+                          method="DOP853", rtol=1e-12, atol=1e-12, t_eval=times)
+    assert trajectory.success, trajectory.message
+    assert trajectory.events == ()
+    np.testing.assert_allclose(trajectory.q[:, :3], np.repeat(reference.y[0][:, None], 3, axis=1), atol=1e-5)
+    assert np.max(np.abs(trajectory.position_residual)) < 1e-9
