@@ -58,8 +58,6 @@ _LIBRARY_GROUPS = {"accessors": (*codegen.ACCESSOR_KERNELS, "Cqd"), "coriolis": 
 _GROUP_OF = {kernel: group for group, kernels in _LIBRARY_GROUPS.items() for kernel in kernels}
 #: Former backend names, still accepted with a DeprecationWarning.
 _DEPRECATED_BACKENDS = {"numpy": "python"}
-#: The dynamics kernel's blocks that are matrices (the others are vectors).
-_MATRIX_TERMS = frozenset({"M", "Phi_q", "A"})
 
 
 class SingularConfigurationError(RuntimeError):

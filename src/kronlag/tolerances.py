@@ -16,8 +16,8 @@ of singular configurations during a simulation -- decides it the same way:
   20) the motion *approaches* one: the index-1 methods, which cannot tell the
   branches apart there, stop with status -1, and the switching method hands
   over to the index-3 method (ALI3-P), which passes it on its branch.  A local
-  minimum of the ratio whose extrapolated value is below ``SINGULAR_RTOL`` is
-  a *passage*, recorded as an event in the :class:`~kronlag.Trajectory`.
+  minimum of the sampled ratio below ``APPROACH_RTOL`` is a *passage*,
+  recorded as an event in the :class:`~kronlag.Trajectory`.
 
 The C code receives the same numbers as macros (:func:`c_macros`), generated
 from this module, so the two cannot disagree.
@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "SINGULAR_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "STRADDLE_RTOL", "numerical_rank", "check_rank_rtol", "rank_magnitudes",
+__all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "numerical_rank", "check_rank_rtol", "rank_magnitudes",
            "singular_ratio", "c_macros"]
 
 #: Default relative rank tolerance on ``[Phi_q; A]`` (see the module docstring).
@@ -44,23 +44,20 @@ RANK_RTOL = 1e-8
 #: A Cholesky pivot ``<= CHOLESKY_RTOL * max(diag)`` of ``Z^T M Z`` means M is not positive
 #: definite on the constraint null space: a singular configuration.
 CHOLESKY_RTOL = 1e-12
-#: A local minimum of the ratio (see above) below this is a passage through a singular
-#: configuration (condition number of ``Phi_q`` above 1e3 there).
-SINGULAR_RTOL = 1e-3
+#: The largest ``rank_rtol`` allowed: a magnitude ratio of 1e-3 (condition number 1e3) is still
+#: a rank, to be passed by the integrators, not a redundant row.
+MAX_RANK_RTOL = 1e-3
 #: A ratio below this: the motion approaches a singular configuration (condition number above 20).
 APPROACH_RTOL = 0.05
 #: The switching method returns from the index-3 method to the fast one above this ratio.
 LEAVE_RTOL = 2 * APPROACH_RTOL
-#: The index-3 method never ends a step where the ratio is below this: it straddles the
-#: singular configuration (the position is determined only to ~ eps / sigma_min^2 there).
-STRADDLE_RTOL = 2 * SINGULAR_RTOL
 
 
 def check_rank_rtol(rank_rtol: float) -> float:
-    """``rank_rtol`` as a float in ``(0, SINGULAR_RTOL)``; ValueError otherwise."""
+    """``rank_rtol`` as a float in ``(0, MAX_RANK_RTOL)``; ValueError otherwise."""
     value = float(rank_rtol)
-    if not 0.0 < value < SINGULAR_RTOL:
-        raise ValueError(f"rank_rtol must lie in (0, {SINGULAR_RTOL:g}), got {rank_rtol!r}")
+    if not 0.0 < value < MAX_RANK_RTOL:
+        raise ValueError(f"rank_rtol must lie in (0, {MAX_RANK_RTOL:g}), got {rank_rtol!r}")
     return value
 
 
@@ -100,5 +97,5 @@ def singular_ratio(Phi_q: np.ndarray, generic_rank: int) -> tuple[float, int]:
 def c_macros(rank_rtol: float) -> str:
     """The policy as C macros for the generated code."""
     return (f"#define KRONLAG_RANK_RTOL {rank_rtol!r}\n#define KRONLAG_CHOLESKY_RTOL {CHOLESKY_RTOL!r}\n"
-            f"#define KRONLAG_SINGULAR_RTOL {SINGULAR_RTOL!r}\n#define KRONLAG_APPROACH_RTOL {APPROACH_RTOL!r}\n"
-            f"#define KRONLAG_LEAVE_RTOL {LEAVE_RTOL!r}\n#define KRONLAG_STRADDLE_RTOL {STRADDLE_RTOL!r}\n")
+            f"#define KRONLAG_APPROACH_RTOL {APPROACH_RTOL!r}\n"
+            f"#define KRONLAG_LEAVE_RTOL {LEAVE_RTOL!r}\n")

@@ -42,7 +42,6 @@ class Result(enum.Enum):
                 "accelerations are not determined (e.g. Euler angles at gimbal lock)")
     STEP_TOO_SMALL = "the step size fell below the smallest step (error test failures)"
     NEWTON_FAILED = "Newton's method did not converge at the smallest step"
-    BRANCH_LOST = "the velocities jump at a singular configuration: the motion would leave its branch"
     PROJECTION_FAILED = "the projection onto the constraints failed"
     OUTPUTS_FULL = "more steps than output rows: pass t_eval to choose the outputs"
     SOLVER_FAILED = "the integrator failed"
@@ -63,7 +62,7 @@ class SingularPassage:
     t : float
         Time of the closest approach (the smallest ``ratio``).
     t_enter, t_exit : float
-        First and last accepted step with ``ratio < SINGULAR_RTOL``.
+        The accepted steps just before and after the closest approach.
     q : (m,)
         Coordinates at ``t``.
     ratio : float

@@ -25,17 +25,13 @@
  * the inertia in J whatever the step size and the units.
  *
  * Error control: the local error of the trapezoidal rule in q is -h^3/12 q''' ~ -h^2/12 (a - a0);
- * its weighted RMS norm with weights 1 / (atol + rtol |q|) must be <= 1.  A step whose velocity
- * projection changes v by more than KL3_JUMP of its size is a velocity jump: the motion would
- * leave its branch at a singular configuration; the step is rejected and shortened, and below
- * the smallest step the integration ends with KL3_BRANCH_LOST. */
+ * its weighted RMS norm with weights 1 / (atol + rtol |q|) must be <= 1. */
 
 #define KL3_MAX_NEWTON 20
 #define KL3_NEWTON_TOL 1e-3    /* weighted RMS of the last Newton correction, error-norm units */
 #define KL3_ROUNDING 1e-13     /* a Newton correction below this (1 + |q|) is at rounding level */
 #define KL3_WEAK 1e-8          /* ... and below this near a singular configuration */
 #define KL3_KAPPA 1e8
-#define KL3_JUMP 1e-2
 #define KL3_SAFETY 0.9
 #define KL3_GROWTH 4.0
 #define KL3_SHRINK 0.2
@@ -44,7 +40,6 @@
 #define KL3_TOO_MUCH_WORK (-1)
 #define KL3_STEP_TOO_SMALL (-2)
 #define KL3_NEWTON_FAILED (-3)
-#define KL3_BRANCH_LOST (-4)
 #define KL3_START_FAILED (-6)
 #define KL3_HANDBACK 1
 #define KL3_OUTPUTS_FULL (-7)
@@ -85,7 +80,7 @@ static void kl3_project(kl3_state *s, const double *Phi_q, const double *r, doub
 }
 
 /* One step of size h from (t, q0, v0, a0, lam0) to (q1, v1, a1, lam1).
- * Returns 0, KL3_NEWTON_FAILED, or KL3_BRANCH_LOST for a velocity jump; *error: the local error norm. */
+ * Returns 0 or KL3_NEWTON_FAILED; *error: the local error norm. */
 static int kl3_step(kl3_state *s, double t, double h, const double *q0, const double *v0, const double *a0,
                     const double *lam0, double *q1, double *v1, double *a1, double *lam1, double *error)
 {
@@ -149,18 +144,13 @@ static int kl3_step(kl3_state *s, double t, double h, const double *q0, const do
     memcpy(lam1, nu, r * sizeof(double));
     memcpy(a1, a, m * sizeof(double));
     /* velocity projection (the terms are those of the converged q1, v1) */
-    double speed = 0.0, jump = 0.0;
     for (int k = 0; k < r; ++k) {
         double sum = 0.0;
         for (int i = 0; i < m; ++i) sum += Phi_q[k * m + i] * v1[i];
         residual[k] = sum;
     }
     kl3_project(s, Phi_q, residual, c * alpha, x);
-    for (int i = 0; i < m; ++i) {
-        speed += v1[i] * v1[i];
-        v1[i] -= x[i];
-        jump += x[i] * x[i];
-    }
+    for (int i = 0; i < m; ++i) v1[i] -= x[i];
     /* acceleration projection with gamma at the projected velocities */
     kronlag_dynamics(t1, q1, v1, s->p, s->terms);
     for (int k = 0; k < r; ++k) {
@@ -175,7 +165,6 @@ static int kl3_step(kl3_state *s, double t, double h, const double *q0, const do
         F[i] = h * h / 12.0 * (a1[i] - a0[i]);
     }
     *error = kl3_norm(F, q0, q1, s);
-    (void)speed; (void)jump;
     return 0;
 }
 

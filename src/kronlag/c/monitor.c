@@ -98,21 +98,3 @@ static double kl_monitor_max_step(const kl_monitor *monitor)
     double rate = (monitor->ratio[1] - monitor->ratio[2]) / (monitor->t[2] - monitor->t[1]);
     return rate > 0.0 ? 0.5 * monitor->ratio[2] / rate : 0.0;
 }
-
-/* When the ratio, extrapolated linearly from the last two samples, reaches zero (the time of the
- * singular configuration ahead); INFINITY when it is not falling. */
-static double kl_monitor_zero(const kl_monitor *monitor)
-{
-    if (monitor->samples < 2) return INFINITY;
-    double rate = (monitor->ratio[1] - monitor->ratio[2]) / (monitor->t[2] - monitor->t[1]);
-    return rate > 0.0 ? monitor->t[2] + monitor->ratio[2] / rate : INFINITY;
-}
-
-/* Half-width in time of the neighbourhood of the singular configuration ahead where the ratio is
- * below KRONLAG_STRADDLE_RTOL (from the current rate of fall; 0 when it is not falling). */
-static double kl_monitor_zone(const kl_monitor *monitor)
-{
-    if (monitor->samples < 2) return 0.0;
-    double rate = (monitor->ratio[1] - monitor->ratio[2]) / (monitor->t[2] - monitor->t[1]);
-    return rate > 0.0 ? KRONLAG_STRADDLE_RTOL / rate : 0.0;
-}
