@@ -1,7 +1,7 @@
 """Slider-crank engine written as bodies + joints: bearing reactions over one revolution.
 
 The crank of the shipped model file ``slider_crank_engine`` turns at a constant
-1500 rpm (inverse dynamics along the prescribed crank angle); the joints' multipliers
+1500 rpm (a drive: inverse dynamics along the prescribed crank angle); the joints' multipliers
 become named reactions (the force the first body of each joint exerts on the second).
 Writes ``slider_crank_engine.png``: the magnitude of the main-bearing, crank-pin and
 wrist-pin forces, the cylinder's side force on the piston and the drive torque, over
@@ -17,13 +17,13 @@ import numpy as np
 import kronlag
 from kronlag.modelfile import load_example
 from kronlag.reactions import joint_reaction
-from kronlag.workflows import inverse_dynamics_along
 
 engine = load_example("slider_crank_engine")
-model = kronlag.derive(engine.system).numeric(engine.numeric_values())
 omega = 1500 * 2 * np.pi / 60  # rad/s
+engine.system.add_drive("theta_crank", omega * kronlag.t)  # the crank turns at a constant speed
+model = kronlag.derive(engine.system).numeric(engine.numeric_values())
 times = np.linspace(0, 2 * np.pi / omega, 181)
-run = inverse_dynamics_along(engine, {"theta_crank": omega * kronlag.t}, times, numeric=model)
+run = kronlag.inverse_dynamics(model, times, engine.guess_vectors()[0])  # drive torque: run.forces
 angle = np.degrees(omega * run.t)
 
 figure, (forces, torque) = plt.subplots(2, 1, sharex=True, figsize=(8, 7), height_ratios=(2, 1))

@@ -127,7 +127,7 @@ expression = "2*x - 2*y"
     (["simulate", "four_bar", "--method", "magic"], "unknown method 'magic'"),
     (["inverse", "four_bar", "--drive", "q9=t"], "expected COORDINATE=EXPRESSION"),
     (["inverse", "four_bar", "--drive", "q1=os.system('x')"], "calling 'os.system' is not allowed"),
-    (["inverse", "four_bar", "--drive", "q1=t", "--drive", "q2=t"], "needs as many drives"),
+    (["inverse", "four_bar", "--drive", "q1=t", "--drive", "q2=t"], "over-driven: 2 drives"),
 ])
 def test_bad_input_exits_2_with_a_clean_message(capsys, tmp_path, argv, message):
     bad = write_model(tmp_path, POINT_MASS.replace('position = ["x", "y"]', 'position = ["x", "y + z"]'), "bad.toml")

@@ -112,7 +112,7 @@ def test_inverse_dynamics_figure():
                              qdd=np.zeros_like(q), forces=np.sin(t)[:, None], lam=np.cos(t)[:, None],
                              mu=np.zeros((11, 0)))
     figure = plot_inverse_dynamics(run, units={"a": "rad", "t": "s", "energy": "J"})
-    assert _titles(figure) == ["Driven coordinates", "Actuator forces", "Lagrange multipliers"]
+    assert _titles(figure) == ["Coordinates", "Actuator forces", "Lagrange multipliers"]
     assert _legend_labels(figure.axes[1]) == ["on $a$ (N*m)"]
     np.testing.assert_array_equal(figure.axes[1].lines[0].get_ydata(), np.sin(t))
     np.testing.assert_array_equal(figure.axes[0].lines[0].get_ydata(), t)

@@ -9,9 +9,11 @@ Kronecker-product matrix form of Lagrange's equations with multipliers
 from . import calculus, frames, joints, models
 from .analysis import Equilibrium, EquilibriumError, LinearModel
 from .derivation import derive
+from .drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
 from .equations import Equations
 from .modelfile import load_model
 from .numeric import (
+    ActuationWarning,
     AssemblyError,
     ForwardDynamicsBatch,
     ForwardDynamicsResult,
@@ -78,6 +80,11 @@ __all__ = [
     "SingularConfigurationError",
     "AssemblyError",
     "RedundantConstraintsWarning",
+    "ActuationWarning",
+    "kinematic_analysis",
+    "Kinematics",
+    "inverse_dynamics",
+    "InverseDynamicsRun",
     "simulate",
     "Trajectory",
     "SingularPassage",

@@ -29,9 +29,10 @@ from .derivation import derive
 from .export import FORMATS, LANGUAGES, export_code, file_stem, format_equations
 from .modelfile import ModelFile, example_names, example_path, load_model, resolve_model
 from .models import BUILTIN_MODELS
-from .plotting import plot_inverse_dynamics
+from .plotting import plot_inverse_dynamics, plot_kinematics
 from .system import ModelError
-from .workflows import check_model, inverse_dynamics_along, model_units, parse_drive, simulate_model, summarize
+from .workflows import (check_model, inverse_dynamics_along, kinematics_along, model_units, parse_drive, simulate_model,
+                        summarize)
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -92,8 +93,8 @@ def _save_trajectory(trajectory, path: Path, arguments: argparse.Namespace, mode
      ".npz": lambda: trajectory.to_npz(path)}[path.suffix]()
 
 
-def _save_inverse(run, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
-    run.save(path)
+def _save_columns(run, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    {".csv": lambda: run.to_csv(path), ".npz": lambda: run.to_npz(path)}[path.suffix]()
 
 
 def _plot_trajectory(trajectory, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
@@ -116,12 +117,18 @@ def _plot_inverse(run, path: Path, arguments: argparse.Namespace, model: ModelFi
     plot_inverse_dynamics(run, path=path, units=model_units(model))
 
 
+def _plot_kinematics(run, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    plot_kinematics(run, path=path, units=model_units(model))
+
+
 _PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg")
 _SIMULATION_OUTPUTS = (_OutputKind("--output", (".csv", ".npz", ".parquet"), _check_parquet, _save_trajectory),
                        _OutputKind("--plot", _PLOT_SUFFIXES, _no_check, _plot_trajectory),
                        _OutputKind("--animate", SUPPORTED_FORMATS, _check_animation, _animate))
-_INVERSE_OUTPUTS = (_OutputKind("--output", (".csv", ".npz"), _no_check, _save_inverse),
+_INVERSE_OUTPUTS = (_OutputKind("--output", (".csv", ".npz"), _no_check, _save_columns),
                     _OutputKind("--plot", _PLOT_SUFFIXES, _no_check, _plot_inverse))
+_KINEMATICS_OUTPUTS = (_OutputKind("--output", (".csv", ".npz"), _no_check, _save_columns),
+                       _OutputKind("--plot", _PLOT_SUFFIXES, _no_check, _plot_kinematics))
 
 
 def _requested_outputs(kinds: Sequence[_OutputKind], arguments: argparse.Namespace,
@@ -295,18 +302,35 @@ def _simulate(arguments: argparse.Namespace) -> None:
                 rescue_name=f"{file_stem(model.system.name)}-trajectory.npz")
 
 
-def _inverse(arguments: argparse.Namespace) -> None:
-    model = resolve_model(arguments.model)
-    outputs = _requested_outputs(_INVERSE_OUTPUTS, arguments, model)
+def _drives(arguments: argparse.Namespace, model: ModelFile) -> dict:
+    """The drives of ``--drive`` options, or else the model file's ``[[drives]]``."""
     drives = dict(parse_drive(text, model) for text in arguments.drive) if arguments.drive else model.drives
     if not drives:
         raise ModelError("no drives: give --drive COORDINATE=EXPRESSION or [[drives]] in the model file")
+    return drives
+
+
+def _driven_run(arguments: argparse.Namespace, outputs_table, run_along, what: str, suffix: str, **options) -> None:
+    """Run ``run_along(model, drives, times, **options)``, report it and write the outputs."""
+    model = resolve_model(arguments.model)
+    outputs = _requested_outputs(outputs_table, arguments, model)
+    drives = _drives(arguments, model)
     t_end = model.simulation.t_end if arguments.t_end is None else arguments.t_end
-    run = inverse_dynamics_along(model, drives, _output_grid(t_end, arguments, 101))
+    run = run_along(model, drives, _output_grid(t_end, arguments, 101), **options)
     print(run.report())
-    failure = "" if run.success else f"inverse dynamics failed {run.message}"
-    _finish_run(run, outputs, arguments, model, failure=failure, save=run.save,
-                rescue_name=f"{file_stem(model.system.name)}-inverse.csv")
+    failure = "" if run.success else f"{what} failed {run.message}"
+    _finish_run(run, outputs, arguments, model, failure=failure, save=run.to_csv,
+                rescue_name=f"{file_stem(model.system.name)}-{suffix}.csv")
+
+
+def _inverse(arguments: argparse.Namespace) -> None:
+    actuated = [name.strip() for name in arguments.actuated.split(",")] if arguments.actuated else None
+    _driven_run(arguments, _INVERSE_OUTPUTS, inverse_dynamics_along, "inverse dynamics", "inverse",
+                actuated=actuated)
+
+
+def _kinematics(arguments: argparse.Namespace) -> None:
+    _driven_run(arguments, _KINEMATICS_OUTPUTS, kinematics_along, "kinematic analysis", "kinematics")
 
 
 # -- parser ---------------------------------------------------------------------------
@@ -382,15 +406,21 @@ def build_parser() -> argparse.ArgumentParser:
                                                       "time; 0.1 shows a fast mechanism ten times slower)")
     pace.add_argument("--duration", type=_positive, metavar="SECONDS", help="playing time of the animation")
 
-    sub = command("inverse", _inverse, "actuator forces and multipliers along a prescribed motion")
-    sub.add_argument("--drive", action="append", metavar="Q=EXPR",
-                     help="prescribed motion of a coordinate as an expression of t, e.g. 'q1=2*pi*t' "
-                          "(repeat for several; default: the model's [[drives]])")
-    sub.add_argument("--t-end", type=_positive, help="final time (default: the model's [simulation] t_end)")
-    _add_grid_options(sub, "101")
-    sub.add_argument("--output", metavar="FILE", help="save the results (.csv or .npz)")
-    sub.add_argument("--plot", metavar="FILE",
-                     help="save a figure of the forces and multipliers (.png, .pdf, .svg, .jpg)")
+    for name, handler, summary, outputs in (
+            ("kinematics", _kinematics, "positions, speeds and accelerations along prescribed motions",
+             "coordinates, speeds, accelerations and points"),
+            ("inverse", _inverse, "actuator forces, multipliers and reactions along prescribed motions",
+             "forces and multipliers")):
+        sub = command(name, handler, summary)
+        sub.add_argument("--drive", action="append", metavar="Q=EXPR",
+                         help="prescribed motion of a coordinate as an expression of t, e.g. 'q1=2*pi*t' "
+                              "(repeat for several, one per degree of freedom; default: the model's [[drives]])")
+        sub.add_argument("--t-end", type=_positive, help="final time (default: the model's [simulation] t_end)")
+        _add_grid_options(sub, "101")
+        sub.add_argument("--output", metavar="FILE", help="save the results (.csv or .npz)")
+        sub.add_argument("--plot", metavar="FILE", help=f"save a figure of the {outputs} (.png, .pdf, .svg, .jpg)")
+    sub.add_argument("--actuated", metavar="Q1,Q2", help="the coordinates that carry the actuators, comma "
+                     "separated (default: the driven coordinates); the drives then only prescribe the motion")
 
     from .cli_analysis import add_commands as add_analysis_commands
 

@@ -28,12 +28,13 @@ correctly rounded floating-point literals (see :class:`_SymengineConverter`).
 The ``"dynamics"`` kernel holds everything forward dynamics needs, with one
 common-subexpression elimination over all of it::
 
-    M (m, m),  h = f_Q - C qd - g (m,),  Phi (r,),  Phi_q (r, m),  gamma (r,),
-    A (s, m),  b (s,),  gamma_nh (s,)
+    M (m, m),  h = f_Q - C qd - g (m,),  Phi (r,),  Phi_q (r, m),  Phi_t (r,),
+    gamma (r,),  A (s, m),  b (s,),  gamma_nh (s,)
 
-with ``gamma = -(dPhi_q/dt) qd`` and ``gamma_nh = -(dA/dt) qd - db/dt``, the
-time derivatives taken by Theorem 1 (``dX/dt = dX/dq (I ⊗ qd)``, written as
-the sparse sum ``sum_k dX/dq_k qd_k``; the constraints do not depend on ``t``).
+with ``gamma = -(dPhi_q/dt) qd - 2 Phi_qt qd - Phi_tt`` and
+``gamma_nh = -(dA/dt) qd - db/dt``, the time derivatives taken by Theorem 1
+(``dX/dt = dX/dq (I ⊗ qd) + dX/dt|_q``, written as the sparse sum
+``sum_k dX/dq_k qd_k``; the partials in ``t`` are nonzero for drives only).
 The C library of the dynamics kernel also contains the solver of the augmented
 system (``kronlag_forward_dynamics``, ``src/kronlag/c/augmented.c``).
 """
@@ -90,16 +91,22 @@ __all__ = [
 #: Python side (:func:`layout`, ``NumericModel.dynamics_terms``) and the C side (offset macros
 #: ``KRONLAG_<KERNEL>_<BLOCK>``, :func:`layout_macros`) derive their offsets from this table.
 #:
-#: ``"dynamics"``: ``h = f_Q - C qd - g``, ``gamma = -(dPhi_q/dt) qd``, ``gamma_nh = -(dA/dt) qd - db/dt``.
+#: ``"dynamics"``: ``h = f_Q - C qd - g``, ``Phi_t = dPhi/dt`` (drives), ``gamma = -d(Phi_q qd + Phi_t)/dt``
+#: and ``gamma_nh = -d(A qd + b)/dt`` at fixed qd, so that ``[Phi_q; A] qdd = [gamma; gamma_nh]``.
 #: ``"tangent"``: the derivatives of the dynamic residual
 #: ``e = M a + C qd + g - f_Q + Phi_q^T nu + A^T mu`` at given accelerations ``a`` and
 #: multipliers ``nu``, ``mu`` (inputs appended to ``p``): ``K = de/dq`` (stiffness, including
 #: the multiplier term ``d(Phi_q^T nu)/dq``) and ``D = de/dqd`` (damping and gyroscopic terms).
 LAYOUTS: dict[str, tuple[tuple[str, str, str | int], ...]] = {
-    "dynamics": (("M", "m", "m"), ("h", "m", 1), ("Phi", "r", 1), ("Phi_q", "r", "m"), ("gamma", "r", 1),
-                 ("A", "s", "m"), ("b", "s", 1), ("gamma_nh", "s", 1)),
+    "dynamics": (("M", "m", "m"), ("h", "m", 1), ("Phi", "r", 1), ("Phi_q", "r", "m"), ("Phi_t", "r", 1),
+                 ("gamma", "r", 1), ("A", "s", "m"), ("b", "s", 1), ("gamma_nh", "s", 1)),
     "tangent": (("K", "m", "m"), ("D", "m", "m")),
 }
+
+
+#: The matrices of :class:`kronlag.Equations` that kernels evaluate as they are.
+_EQUATIONS_MATRICES = frozenset(("M", "C", "Cqd", "C_christoffel", "g", "Phi", "Phi_q", "Phi_t", "A", "b", "f_Q",
+                                 "gamma", "gamma_nh"))
 
 
 def layout(kernel: str, m: int, r: int, s: int) -> tuple[tuple[str, int, tuple[int, ...]], ...]:
@@ -143,7 +150,7 @@ def solver_header(m: int, r: int, s: int, rank_rtol: float) -> str:
 #: Kernels that evaluate one public matrix each (``NumericModel.M`` etc.), compiled together.
 #: ``"C"``, ``"Cqd"`` and ``"C_christoffel"`` are kernels too (see ``NumericModel`` for how
 #: they are grouped into libraries).
-ACCESSOR_KERNELS = ("M", "g", "Phi", "Phi_q", "A", "b", "f_Q", "gamma", "gamma_nh", "potential_energy")
+ACCESSOR_KERNELS = ("M", "g", "Phi", "Phi_q", "Phi_t", "A", "b", "f_Q", "gamma", "gamma_nh", "potential_energy")
 
 _CFLAGS = ("-O2", "-fno-math-errno", "-fPIC", "-pthread")
 
@@ -307,7 +314,7 @@ class KernelSource:
 
     def _compute(self, name: str) -> list[list[se.Basic]]:
         eq = self.equations
-        if name in ("M", "C", "Cqd", "C_christoffel", "g", "Phi", "Phi_q", "A", "b", "f_Q", "gamma", "gamma_nh"):
+        if name in _EQUATIONS_MATRICES:
             return self.convert.matrix(getattr(eq, name), name)
         if name == "potential_energy":
             return [[self.convert.entry(sp.sympify(eq.potential_energy), "potential energy")]]
@@ -381,8 +388,9 @@ _ARRAY_NAMESPACE.update(asin=np.arcsin, acos=np.arccos, atan=np.arctan, atan2=np
 
 
 def dynamics_shape(kernel: Kernel) -> tuple[int, int, int]:
-    """``(m, r, s)`` from the blocks of the ``"dynamics"`` kernel (M, h, Phi, Phi_q, gamma, A, b, gamma_nh)."""
-    return tuple(kernel.blocks[i].shape[0] for i in (0, 2, 6))
+    """``(m, r, s)`` from the blocks of the ``"dynamics"`` kernel (see :data:`LAYOUTS`)."""
+    rows = {block.name: block.shape[0] for block in kernel.blocks}
+    return rows["M"], rows["Phi"], rows["A"]
 
 
 def python_source(kernel: Kernel) -> str:

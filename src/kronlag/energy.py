@@ -1,16 +1,17 @@
 """Energy balance along a solution of Eq. 23.
 
 With ``T = 1/2 qd^T M qd`` and the potential ``Pi(q)`` (gravity, springs,
-potentials), Eq. 23 gives ``d(T + Pi)/dt = qd^T f_Q - qd^T (Phi_q^T lambda + A^T mu)``;
-the constraint forces do no work on motions that satisfy ``Phi_q qd = 0`` and
-``A qd + b = 0`` with ``b = 0`` (scleronomic constraints).  So::
+potentials), Eq. 23 gives ``d(T + Pi)/dt = qd^T (f_Q - Phi_q^T lambda - A^T mu)``.
+On motions that satisfy ``Phi_q qd + Phi_t = 0`` and ``A qd + b = 0`` the
+constraint forces' power is ``lambda^T Phi_t + mu^T b``: zero for scleronomic
+constraints, the power of the drives for rheonomic ones.  So::
 
-    E(t) - E(0) = W(t),   W(t) = integral_0^t qd^T f_Q(q, qd, t) dt
+    E(t) - E(0) = W(t),   W(t) = integral_0^t qd^T (f_Q - Phi_q^T lambda - A^T mu) dt
 
-where ``W`` is the work of the non-conservative forces: applied forces and
-torques, dampers and generalized forces.  ``E - E(0) - W`` is the true energy
-drift of an integration, for driven and damped models as well as conservative
-ones.
+where ``W`` is the work of the non-conservative forces (applied forces and
+torques, dampers, generalized forces) and of the drives.  ``E - E(0) - W`` is
+the true energy drift of an integration, for driven and damped models as well
+as conservative ones.
 """
 
 from __future__ import annotations
@@ -21,13 +22,18 @@ __all__ = ["nonconservative_work"]
 
 
 def _power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:
-    return float(qd @ model.f_Q(q, qd, t))
+    forces = model.f_Q(q, qd, t)
+    if model.equations.constraints_do_work:
+        result = model.forward_dynamics(q, qd, t)
+        forces = forces - model.Phi_q(q, t).T @ result.lam - model.A(q, t).T @ result.mu
+    return float(qd @ forces)
 
 
 def nonconservative_work(model, t, q, qd, qdd) -> np.ndarray:
-    """``W(t_k) = integral_{t_0}^{t_k} qd^T f_Q dt`` along a sampled motion, shape (N,).
+    """``W(t_k) = integral_{t_0}^{t_k} P dt`` along a sampled motion, shape (N,).
 
-    The power ``P = qd^T f_Q`` is integrated between samples by the cubic
+    The power ``P = qd^T f_Q``, plus that of the constraint forces
+    ``-qd^T (Phi_q^T lambda + A^T mu)`` when they do work (drives, ``b != 0``), is integrated between samples by the cubic
     Hermite rule ``h/2 (P0 + P1) + h^2/12 (P0' - P1')`` (error O(h^5) per
     interval), with ``P' = dP/dt`` by a central difference along the motion
     ``(q + e qd, qd + e qdd, t + e)``.

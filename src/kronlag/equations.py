@@ -51,6 +51,8 @@ class Equations:
         Holonomic constraints ``f(q)``.
     Phi_q : (r, m)
         Constraint Jacobian ``df/dq``.
+    Phi_t : (r, 1)
+        ``df/dt``, nonzero for drives (rheonomic constraints ``f(q, t) = 0``).
     A : (s, m), b : (s, 1)
         Nonholonomic constraints ``A(q) qd + b(q) = 0``.
     f_Q : (m, 1)
@@ -131,13 +133,30 @@ class Equations:
         return sp.ImmutableMatrix(total)
 
     @cached_property
-    def gamma(self) -> sp.ImmutableMatrix:
-        """``gamma = -(d Phi_q/dt) qd``, shape (r, 1), so that ``Phi_q qdd = gamma``.
+    def Phi_t(self) -> sp.ImmutableMatrix:
+        """``Phi_t = dPhi/dt`` at fixed q, shape (r, 1): zero unless constraints are drives
+        (rheonomic); the velocity constraints are ``Phi_q qd + Phi_t = 0``."""
+        return sp.ImmutableMatrix(self.Phi.diff(self.time))
 
-        ``d Phi_q/dt = dPhi_q/dq (I ⊗ qd)`` (Theorem 1), evaluated as the sparse sum
-        ``sum_k dPhi_q/dq_k qd_k``.
+    @property
+    def rheonomic(self) -> bool:
+        """Whether a constraint depends on the time (a drive)."""
+        return self.time in set().union(*(entry.free_symbols for entry in (*self.Phi, *self.b)))
+
+    @cached_property
+    def constraints_do_work(self) -> bool:
+        """Whether the constraint forces can do work: ``Phi_t`` or ``b`` is not identically zero
+        (their power is ``lambda^T Phi_t + mu^T b`` on the constraint manifold)."""
+        return any(entry != 0 for entry in (*self.Phi_t, *self.b))
+
+    @cached_property
+    def gamma(self) -> sp.ImmutableMatrix:
+        """``gamma = -(dPhi_q/dt) qd - 2 Phi_qt qd - Phi_tt``, shape (r, 1), so that ``Phi_q qdd = gamma``.
+
+        ``dPhi_q/dt = dPhi_q/dq (I ⊗ qd)`` (Theorem 1), evaluated as the sparse sum
+        ``sum_k dPhi_q/dq_k qd_k``; the time terms vanish unless constraints are drives.
         """
-        return self._acceleration_offset(self.Phi_q, sp.zeros(self.Phi.rows, 1))
+        return self._acceleration_offset(self.Phi_q, self.Phi_t)
 
     @cached_property
     def gamma_nh(self) -> sp.ImmutableMatrix:
@@ -145,9 +164,9 @@ class Equations:
         return self._acceleration_offset(self.A, self.b)
 
     def _acceleration_offset(self, jacobian: sp.MatrixBase, offset: sp.MatrixBase) -> sp.ImmutableMatrix:
-        """``-d/dt (jacobian qd + offset)`` at fixed ``qd``, by Theorem 1."""
+        """``-d/dt (jacobian qd + offset)`` at fixed ``qd``: Theorem 1 for q, plus the partial in t."""
         velocity = jacobian * sp.Matrix(self.speeds) + offset
-        rate = sp.zeros(*velocity.shape)
+        rate = velocity.diff(self.time)
         for q, qd in zip(self.coordinates, self.speeds):
             rate += velocity.diff(q) * qd
         return sp.ImmutableMatrix(-rate)

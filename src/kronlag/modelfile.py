@@ -40,7 +40,7 @@ Format (every table but ``coordinates`` is optional)::
     at_a = "B"
     at_b = ["-l2/2", 0]
 
-    [[constraints]]                             # f(q) = 0
+    [[constraints]]                             # f(q) = 0, or f(q, t) = 0 (a drive in every run)
     name = "loop x"
     expression = "l1*cos(q1) + l2*cos(q2) - l3*cos(q3) - l4"
 
@@ -64,7 +64,7 @@ Format (every table but ``coordinates`` is optional)::
     rtol = 1e-8
     atol = 1e-10
 
-    [[drives]]                                  # prescribed motion for inverse dynamics
+    [[drives]]                                  # prescribed motion for kinematics and inverse dynamics
     coordinate = "q1"
     motion = "1 + 2*pi*t"
 

@@ -41,12 +41,14 @@ __all__ = [
     "SingularConfigurationError",
     "AssemblyError",
     "RedundantConstraintsWarning",
+    "ActuationWarning",
     "solve_augmented",
     "least_norm",
+    "velocity_constraints",
 ]
 
 #: Kernels whose result is a vector (all others are matrices, even when 1 x 1).
-_VECTOR_KERNELS = frozenset({"g", "Phi", "b", "f_Q", "Cqd", "gamma", "gamma_nh", "potential_energy"})
+_VECTOR_KERNELS = frozenset({"g", "Phi", "Phi_t", "b", "f_Q", "Cqd", "gamma", "gamma_nh", "potential_energy"})
 #: Kernels that read the speeds ``qd`` (the others read ``q`` and ``t`` only).
 _SPEED_KERNELS = frozenset({"C", "C_christoffel", "Cqd", "f_Q", "gamma", "gamma_nh"})
 #: The matrices :meth:`NumericModel.evaluate_batch` evaluates.
@@ -80,6 +82,10 @@ class AssemblyError(RuntimeError):
 
 class RedundantConstraintsWarning(UserWarning):
     """The constraint Jacobian ``[Phi_q; A]`` is rank deficient: the multipliers are not unique."""
+
+
+class ActuationWarning(UserWarning):
+    """More actuators than degrees of freedom: the actuator forces are not unique (minimum-norm split)."""
 
 
 @dataclass(slots=True, eq=False)
@@ -156,6 +162,12 @@ def split_terms(kernel: codegen.Kernel, flat: np.ndarray) -> dict[str, np.ndarra
             for name, offset, shape in codegen.layout("dynamics", *codegen.dynamics_shape(kernel))}
 
 
+def velocity_constraints(terms: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """``B = [Phi_q; A]`` (r + s, m) and ``c = [Phi_t; b]`` (r + s,) from :func:`split_terms` of
+    one state: the velocity constraints of both kinds are ``B qd + c = 0``."""
+    return (np.vstack([terms["Phi_q"], terms["A"]]), np.concatenate([terms["Phi_t"], terms["b"]]))
+
+
 def solve_dynamics_terms(kernel: codegen.Kernel, flat: np.ndarray, qd: np.ndarray, alpha: float,
                          beta: float, *, rank_rtol: float = RANK_RTOL) -> tuple:
     """Forward dynamics from the flat output of the ``"dynamics"`` kernel with :func:`solve_augmented`.
@@ -166,7 +178,7 @@ def solve_dynamics_terms(kernel: codegen.Kernel, flat: np.ndarray, qd: np.ndarra
     terms = split_terms(kernel, flat)
     r = len(terms["Phi"])
     G = np.vstack([terms["Phi_q"], terms["A"]])
-    c = np.concatenate([terms["gamma"] - 2 * alpha * terms["Phi_q"] @ qd - beta ** 2 * terms["Phi"],
+    c = np.concatenate([terms["gamma"] - 2 * alpha * (terms["Phi_q"] @ qd + terms["Phi_t"]) - beta ** 2 * terms["Phi"],
                         terms["gamma_nh"] - alpha * (terms["A"] @ qd + terms["b"])])
     solution = solve_augmented(terms["M"], terms["h"], G, c, rank_rtol=rank_rtol)
     if solution is None:
@@ -512,6 +524,10 @@ class NumericModel:
         """Constraint Jacobian ``Phi_q = df/dq``, shape (r, m)."""
         return self._evaluate("Phi_q", q, None, t)
 
+    def Phi_t(self, q, t: float = 0.0) -> np.ndarray:
+        """``Phi_t = df/dt`` (nonzero for drives; ``Phi_q qd + Phi_t = 0``), shape (r,)."""
+        return self._evaluate("Phi_t", q, None, t)
+
     def A(self, q, t: float = 0.0) -> np.ndarray:
         """Nonholonomic constraint matrix ``A(q)``, shape (s, m)."""
         return self._evaluate("A", q, None, t)
@@ -529,7 +545,7 @@ class NumericModel:
         return self._evaluate("Cqd", q, qd, t)
 
     def gamma(self, q, qd, t: float = 0.0) -> np.ndarray:
-        """``gamma = -(dPhi_q/dt) qd`` (so that ``Phi_q qdd = gamma``), shape (r,)."""
+        """``gamma = -(dPhi_q/dt) qd - 2 Phi_qt qd - Phi_tt`` (so that ``Phi_q qdd = gamma``), shape (r,)."""
         return self._evaluate("gamma", q, qd, t)
 
     def gamma_nh(self, q, qd, t: float = 0.0) -> np.ndarray:
@@ -554,7 +570,7 @@ class NumericModel:
         -------
         dict
             ``M`` (m, m), ``h = f_Q - C qd - g`` (m,), ``Phi`` (r,), ``Phi_q`` (r, m),
-            ``gamma`` (r,), ``A`` (s, m), ``b`` (s,), ``gamma_nh`` (s,).
+            ``Phi_t`` (r,), ``gamma`` (r,), ``A`` (s, m), ``b`` (s,), ``gamma_nh`` (s,).
         """
         return split_terms(self._dynamics.kernels["dynamics"], self._evaluate("dynamics", q, qd, t))
 
@@ -662,54 +678,61 @@ class NumericModel:
         return flat.reshape(len(q), *((block.size,) if name in _VECTOR_KERNELS else block.shape))
 
     def inverse_dynamics(self, q, qd, qdd, actuated: Sequence = ("q1",), t: float = 0.0, *,
-                         rtol: float = 1e-8) -> InverseDynamicsResult:
+                         constraints: Sequence | None = None, rtol: float = 1e-8,
+                         constraint_tol: float = 1e-6) -> InverseDynamicsResult:
         """Actuator forces ``u`` on the coordinates ``actuated`` and the multipliers for a given motion.
 
-        The actuators add ``B u`` to ``f_Q`` in Eq. 23, so (least squares, minimum norm)::
+        The actuators add ``B u`` to ``f_Q`` in Eq. 23::
 
-            [B, -Phi_q^T, -A^T] [u; lambda; mu] = M qdd + C qd + g - f_Q
+            M qdd + C qd + g - f_Q + Phi_q^T lambda + A^T mu = B u
 
         where column ``j`` of ``B`` (m, n_a) selects the coordinate ``actuated[j]``;
         ``lambda`` and ``mu`` have the sign of Eq. 23 (as in :meth:`forward_dynamics`).
+        With ``N`` (m, m - rho) spanning the null space of ``G = [Phi_q; A]`` (the
+        rank policy of :mod:`kronlag.tolerances`), ``u`` is the minimum-norm solution of
+        ``N^T B u = N^T (M qdd + C qd + g - f_Q)`` and ``[lambda; mu]`` the minimum-norm
+        solution of ``G^T [lambda; mu] = B u - (M qdd + C qd + g - f_Q)``.  More
+        actuators than degrees of freedom (``m - rho``): the forces are not unique and
+        the minimum-norm split is returned with an :class:`ActuationWarning`.
 
         Parameters
         ----------
         q, qd, qdd : (m,)
+            The motion.  It must satisfy the constraints (those of ``constraints``)
+            at position, velocity and acceleration level: ``Phi = 0``,
+            ``Phi_q qd + Phi_t = 0``, ``Phi_q qdd = gamma`` (and ``A qd + b = 0``,
+            ``A qdd = gamma_nh``), else ValueError naming the constraint and the level.
         actuated : sequence of coordinate names or symbols
         t : float
+        constraints : sequence of holonomic constraint names or indices, optional
+            The rows of ``Phi`` that act (default: all); the others' ``lambda`` is 0.
+            Leaving out the drives of a mechanism replaces them by the actuators.
         rtol : float
             The motion is rejected (ValueError) when the equations cannot be met to
             ``rtol`` times the size of the right-hand side (too few actuators).
+        constraint_tol : float
+            Relative tolerance of the constraint checks, with the scales ``1 + max |q|``
+            for positions, ``max |G| max |qd| + |Phi_t_j|`` for velocities and
+            ``max |G| max |qdd| + |gamma_j|`` for accelerations (``G = [Phi_q; A]``).
 
         Returns
         -------
         InverseDynamicsResult
             ``forces`` (n_a,), ``lam`` (r,), ``mu`` (s,).
         """
-        columns = _names(list(actuated), self._coordinate_index, "actuated coordinate(s)")
-        terms = self.dynamics_terms(q, qd, t)
-        qdd = self._vector(qdd, "qdd")
-        inertial = terms["M"] @ qdd
-        rhs = inertial - terms["h"]
-        selection = np.zeros((self.m, len(columns)))
-        selection[columns, range(len(columns))] = 1.0
-        system = np.hstack([selection, -terms["Phi_q"].T, -terms["A"].T])
-        solution, _, rank, _ = np.linalg.lstsq(system, rhs, rcond=None)
-        residual = np.linalg.norm(system @ solution - rhs)
-        scale = max(np.linalg.norm(rhs), np.linalg.norm(inertial), np.linalg.norm(terms["h"]), 1e-300)
-        if residual > rtol * scale:
-            raise ValueError(f"the actuators {list(actuated)} cannot produce this motion: the equations of "
-                             f"motion are violated by {residual:.3g} (relative {residual / scale:.3g})")
-        n, r = len(columns), self.r
-        return InverseDynamicsResult(solution[:n], solution[n:n + r], solution[n + r:],
-                                     rank == system.shape[1])
+        q, qd, qdd = (self._vector(x, name)[None] for x, name in ((q, "q"), (qd, "qd"), (qdd, "qdd")))
+        terms = {name: block[None] for name, block in self.dynamics_terms(q[0], qd[0], t).items()}
+        result = self._inverse_dynamics(np.array([float(t)]), terms, q, qd, qdd, actuated, constraints,
+                                        rtol, constraint_tol)
+        return InverseDynamicsResult(result.forces[0], result.lam[0], result.mu[0], result.unique)
 
     def inverse_dynamics_trajectory(self, t, q, qd, qdd, actuated: Sequence = ("q1",), *,
-                                    rtol: float = 1e-8) -> InverseDynamicsResult:
+                                    constraints: Sequence | None = None, rtol: float = 1e-8,
+                                    constraint_tol: float = 1e-6) -> InverseDynamicsResult:
         """:meth:`inverse_dynamics` along a prescribed motion, time along the first axis.
 
         All N states in one batched kernel call (see :meth:`forward_dynamics_batch`) and
-        stacked least squares (the pseudo-inverse, minimum norm).
+        stacked pseudo-inverses.
 
         Parameters
         ----------
@@ -728,29 +751,96 @@ class NumericModel:
         for name, array in zip(("q", "qd", "qdd"), (q, qd, qdd)):
             if array.shape != (len(t), self.m):
                 raise ValueError(f"{name} must have shape ({len(t)}, {self.m}), got {array.shape}")
-        columns = _names(list(actuated), self._coordinate_index, "actuated coordinate(s)")
         times, parameters = self._batch_times(t, len(t))
         kernel = self._dynamics.kernels["dynamics"]
         terms = split_terms(kernel, self._dynamics.evaluate_batch(kernel.name, times, q, qd, parameters))
+        return self._inverse_dynamics(t, terms, q, qd, qdd, actuated, constraints, rtol, constraint_tol)
+
+    def _inverse_dynamics(self, t, terms, q, qd, qdd, actuated, constraints, rtol: float,
+                          constraint_tol: float) -> InverseDynamicsResult:
+        """The stacked solution of :meth:`inverse_dynamics` at N states (``terms``: :func:`split_terms`)."""
+        columns = _names(list(actuated), self._coordinate_index, "actuated coordinate(s)")
+        rows = self._constraint_rows(constraints)
+        self._check_motion(t, terms, q, qd, qdd, rows, constraint_tol)
+        n = len(t)
         inertial = np.einsum("nij,nj->ni", terms["M"], qdd)
         rhs = inertial - terms["h"]
-        selection = np.zeros((len(t), self.m, len(columns)))
+        G = np.concatenate([terms["Phi_q"][:, rows], terms["A"]], axis=1)
+        selection = np.zeros((n, self.m, len(columns)))
         selection[:, columns, range(len(columns))] = 1.0
-        system = np.concatenate([selection, -np.swapaxes(terms["Phi_q"], 1, 2), -np.swapaxes(terms["A"], 1, 2)],
-                                axis=2)
-        solution = np.einsum("nij,nj->ni", np.linalg.pinv(system), rhs)
-        residual = np.linalg.norm(np.einsum("nij,nj->ni", system, solution) - rhs, axis=1)
+        # null-space projector of G: P = I - G^+ G, so that P G^T = 0
+        G_pinv = np.linalg.pinv(G, rcond=self.rank_rtol) if G.shape[1] else np.zeros((n, self.m, 0))
+        projector = np.eye(self.m) - G_pinv @ G
+        reduced = projector @ selection
+        forces = np.einsum("nij,nj->ni", np.linalg.pinv(reduced, rcond=self.rank_rtol),
+                           np.einsum("nij,nj->ni", projector, rhs)) if columns else np.zeros((n, 0))
+        excess = np.einsum("nij,nj->ni", selection, forces) - rhs
+        multipliers = np.einsum("nji,nj->ni", G_pinv, excess)  # (G^T)^+ = (G^+)^T
+        residual = np.linalg.norm(excess - np.einsum("nji,nj->ni", G, multipliers), axis=1)
         scale = np.maximum.reduce([np.linalg.norm(rhs, axis=1), np.linalg.norm(inertial, axis=1),
-                                   np.linalg.norm(terms["h"], axis=1), np.full(len(t), 1e-300)])
+                                   np.linalg.norm(terms["h"], axis=1), np.full(n, 1e-300)])
         violated = np.flatnonzero(residual > rtol * scale)
+        degrees = [self.m - numerical_rank(np.linalg.svd(g, compute_uv=False), self.rank_rtol) for g in G[:1]]
         if len(violated):
             i = violated[0]
+            shortage = (f"; {len(columns)} actuator(s) for {degrees[0]} degree(s) of freedom"
+                        if degrees and len(columns) < degrees[0] else "")
             raise ValueError(f"the actuators {list(actuated)} cannot produce this motion at t = {t[i]:g} "
                              f"(and {len(violated) - 1} other times): the equations of motion are violated "
-                             f"by {residual[i]:.3g} (relative {residual[i] / scale[i]:.3g})")
-        n, r = len(columns), self.r
-        unique = bool(np.all(np.linalg.matrix_rank(system) == system.shape[2])) if len(t) else True
-        return InverseDynamicsResult(solution[:, :n], solution[:, n:n + r], solution[:, n + r:], unique)
+                             f"by {residual[i]:.3g} (relative {residual[i] / scale[i]:.3g}){shortage}")
+        independent = [numerical_rank(np.linalg.svd(x, compute_uv=False), self.rank_rtol) for x in reduced]
+        forces_unique = all(rank == len(columns) for rank in independent)
+        if not forces_unique and n:
+            warnings.warn(f"{len(columns)} actuators {list(actuated)} for {degrees[0]} degree(s) of freedom: "
+                          "over-actuated, the forces returned are the minimum-norm split", ActuationWarning,
+                          stacklevel=3)
+        multipliers_unique = all(numerical_rank(np.linalg.svd(g, compute_uv=False), self.rank_rtol) == g.shape[0]
+                                 for g in G)
+        lam = np.zeros((n, self.r))
+        lam[:, rows] = multipliers[:, :len(rows)]
+        return InverseDynamicsResult(forces, lam, multipliers[:, len(rows):], forces_unique and multipliers_unique)
+
+    def _constraint_rows(self, constraints: Sequence | None) -> list[int]:
+        """Indices of the holonomic constraints named (or indexed) in ``constraints`` (default: all)."""
+        if constraints is None:
+            return list(range(self.r))
+        names = [item.name for item in self.equations.system.constraints]
+        rows = []
+        for item in constraints:
+            if isinstance(item, int | np.integer) and 0 <= item < self.r:
+                rows.append(int(item))
+            elif item in names:
+                rows.append(names.index(item))
+            else:
+                raise ValueError(f"unknown constraint {item!r}; constraints are {names}")
+        return sorted(set(rows))
+
+    def _check_motion(self, t, terms, q, qd, qdd, rows: list[int], tol: float) -> None:
+        """ValueError naming the first constraint (of ``rows`` and the nonholonomic ones) that the
+        motion violates at position, velocity or acceleration level, relative to ``tol``."""
+        system = self.equations.system
+        names = ([system.constraints[j].name for j in rows]
+                 + [item.name for item in system.nonholonomic_constraints])
+        jacobian = np.concatenate([terms["Phi_q"][:, rows], terms["A"]], axis=1)
+        offset = np.concatenate([terms["Phi_t"][:, rows], terms["b"]], axis=1)
+        rate = np.concatenate([terms["gamma"][:, rows], terms["gamma_nh"]], axis=1)
+        magnitude = np.max(np.abs(jacobian), axis=(1, 2), initial=0.0)[:, None]
+        phi = terms["Phi"][:, rows]
+        size = 1.0 + np.max(np.abs(q), axis=1, initial=0.0)[:, None]
+        levels = [("position", "Phi", names[:len(rows)], phi, np.broadcast_to(size, phi.shape)),
+                  ("velocity", "Phi_q qd + Phi_t (A qd + b)", names, np.einsum("nij,nj->ni", jacobian, qd) + offset,
+                   magnitude * np.max(np.abs(qd), axis=1)[:, None] + np.abs(offset)),
+                  ("acceleration", "Phi_q qdd - gamma (A qdd - gamma_nh)", names,
+                   np.einsum("nij,nj->ni", jacobian, qdd) - rate,
+                   magnitude * np.max(np.abs(qdd), axis=1)[:, None] + np.abs(rate))]
+        for level, formula, level_names, residual, scale in levels:
+            excess = np.abs(residual) - tol * scale
+            if residual.size and np.max(excess) > 0:
+                i, j = np.unravel_index(np.argmax(excess), excess.shape)
+                raise ValueError(f"the motion violates constraint {level_names[j]!r} at {level} level at "
+                                 f"t = {t[i]:g}: {formula} = {residual[i, j]:.3g} (tolerance "
+                                 f"{tol * scale[i, j]:.3g}); give q, qd, qdd that satisfy the constraints "
+                                 "(e.g. from kronlag.kinematic_analysis or a simulation)")
 
     # -- consistent initial conditions ---------------------------------------------------------
 
@@ -761,8 +851,8 @@ class NumericModel:
         Positions: Gauss-Newton on ``Phi(q) = 0`` over the free coordinates
         (minimum-norm steps ``Phi_q[:, free] dq = -Phi``, halved while the residual
         grows) until ``max |Phi| <= tol``.  Speeds: the least change of ``qd_guess``
-        (zero if not given) in the free speeds that satisfies ``Phi_q qd = 0`` and
-        ``A qd + b = 0``.
+        (zero if not given) in the free speeds that satisfies ``Phi_q qd + Phi_t = 0`` and
+        ``A qd + b = 0`` (``Phi_t``, ``b`` and, for drives, ``Phi`` depend on ``t``).
 
         Parameters
         ----------
@@ -772,7 +862,7 @@ class NumericModel:
         tol : float
         max_iterations : int
         t : float
-            Time at which time-varying parameters are evaluated.
+            Time at which the drives and time-varying parameters are evaluated.
 
         Returns
         -------
@@ -810,14 +900,14 @@ class NumericModel:
         held = self._held(qd_fixed, qd)
         free = [i for i in range(self.m) if i not in held]
         G = np.vstack([self.Phi_q(q, t), self.A(q, t)])
-        target = np.concatenate([np.zeros(self.r), -self.b(q, t)])
+        target = -np.concatenate([self.Phi_t(q, t), self.b(q, t)])
         if len(target):
             qd[free] += least_norm(G[:, free], target - G @ qd, rank_rtol=self.rank_rtol)
             violation = float(np.max(np.abs(G @ qd - target)))
             allowed = tol * max(1.0, float(np.max(np.abs(G))) * float(np.max(np.abs(qd))))
             if violation > allowed:
                 raise AssemblyError(f"no speeds with {dict(qd_fixed or {})} held satisfy the velocity "
-                                    f"constraints: max |[Phi_q qd; A qd + b]| = {violation:.3g}", violation)
+                                    f"constraints: max |[Phi_q qd + Phi_t; A qd + b]| = {violation:.3g}", violation)
         return q, qd
 
     def _held(self, values: Mapping | None, target: np.ndarray) -> set[int]:

@@ -24,9 +24,9 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from .trajectory import Trajectory
-    from .workflows import InverseDynamicsRun
+    from .drives import InverseDynamicsRun, Kinematics
 
-__all__ = ["plot_trajectory", "plot_inverse_dynamics"]
+__all__ = ["plot_trajectory", "plot_kinematics", "plot_inverse_dynamics"]
 
 _PANEL_HEIGHT = 2.8  # inches per row of panels
 _FIGURE_WIDTH = 12.0
@@ -231,33 +231,65 @@ def _finish(figure: Figure, grid: np.ndarray, *, title: str, failed: bool, units
     return figure
 
 
+def _series_figure(run: Kinematics, series: list[tuple[str, str, np.ndarray, list[str]]], title: str, *,
+                   units: Mapping[str, str], path: str | PathLike | None, show: bool) -> Figure:
+    """One panel per ``(title, ylabel, values (N, k), labels)`` of ``series`` against ``run.t``."""
+    figure = _new_figure(show=show, figsize=(_FIGURE_WIDTH / 2 + 1.5, 0.6 + _PANEL_HEIGHT * len(series)),
+                         layout="constrained")
+    grid = figure.subplots(len(series), 1, sharex=True, squeeze=False)
+    for axes, (panel, ylabel, values, labels) in zip(grid.flat, series):
+        _plot_series(axes, run.t, values, labels, title=panel, ylabel=ylabel)
+    if not run.success:
+        title += f"\nFAILED {run.message}"
+    return _finish(figure, grid, title=title, failed=not run.success, units=units, path=path, show=show)
+
+
+def _kinematic_series(run: Kinematics, units: Mapping[str, str]) -> list[tuple[str, str, np.ndarray, list[str]]]:
+    """Panels of the coordinates, and of the named points' positions."""
+    series = [("Coordinates", "$q$", run.q,
+               [_with_unit(_math_label(name), units.get(name)) for name in run.coordinate_names])]
+    if run.points:
+        positions = np.hstack([state["position"] for state in run.points.values()])
+        labels = [f"{point} {axis}" for point, state in run.points.items()
+                  for axis in "xyz"[:state["position"].shape[1]]]
+        series.append(("Points", "position", positions, labels))
+    return series
+
+
+def plot_kinematics(run: Kinematics, *, path: str | PathLike | None = None, show: bool = False,
+                    units: Mapping[str, str] | None = None) -> Figure:
+    """Plot the result of :func:`kronlag.kinematic_analysis`: the coordinates ``q``, their speeds
+    ``qd`` and accelerations ``qdd``, and the named points' positions.  Options as for
+    :func:`plot_trajectory`."""
+    units = dict(units or {})
+    names = run.coordinate_names
+    series = _kinematic_series(run, units)
+    series[1:1] = [("Speeds", r"$\dot{q}$", run.qd,
+                    [_with_unit(_math_label(name, dotted=True), _rate_unit(units.get(name), units)) for name in names]),
+                   ("Accelerations", r"$\ddot{q}$", run.qdd, [_math_label(f"{name}dd") for name in names])]
+    return _series_figure(run, series, f"kinematic analysis: {len(run.t)} samples", units=units, path=path,
+                          show=show)
+
+
 def plot_inverse_dynamics(run: InverseDynamicsRun, *, path: str | PathLike | None = None, show: bool = False,
                           units: Mapping[str, str] | None = None) -> Figure:
-    """Plot the result of :func:`kronlag.workflows.inverse_dynamics_along`.
+    """Plot the result of :func:`kronlag.inverse_dynamics`.
 
-    Panels: the prescribed coordinates ``q`` of the driven coordinates, the
-    generalized forces ``f_Q`` on them (the actuator forces or torques), and
-    the multipliers ``lambda`` / ``mu`` (if the model has constraints).
-    Force units are ``N*m`` on an angle and ``N`` on a length, when the
-    energy is in ``J``.  Options as for :func:`plot_trajectory`.
+    Panels: the coordinates ``q`` (and the named points), the actuator forces
+    ``u`` (on the actuated coordinates, or of the drives), and the multipliers
+    ``lambda`` / ``mu`` (if the model has constraints).  Force units are ``N*m``
+    on an angle and ``N`` on a length, when the energy is in ``J``.  Options as
+    for :func:`plot_trajectory`.
     """
     units = dict(units or {})
-    driven = [run.coordinate_names.index(name) for name in run.actuated]
     force_units = {"rad": "N*m", "m": "N"} if units.get("energy") == "J" else {}
-    series = [("Driven coordinates", "$q$", run.q[:, driven],
-               [_with_unit(_math_label(name), units.get(name)) for name in run.actuated]),
-              ("Actuator forces", "generalized force", run.forces,
-               [_with_unit(f"on {_math_label(name)}", force_units.get(units.get(name, ""))) for name in run.actuated])]
+    series = _kinematic_series(run, units)
+    series.append(("Actuator forces", "generalized force", run.forces,
+                   [_with_unit(f"on {_math_label(name)}" if name in run.coordinate_names else name,
+                               force_units.get(units.get(name, ""))) for name in run.actuated]))
     if run.lam.shape[1] + run.mu.shape[1]:
         series.append(("Lagrange multipliers", r"$\lambda,\ \mu$", np.hstack([run.lam, run.mu]),
                        [_math_label(f"lambda{j + 1}") for j in range(run.lam.shape[1])]
                        + [_math_label(f"mu{k + 1}") for k in range(run.mu.shape[1])]))
-    figure = _new_figure(show=show, figsize=(_FIGURE_WIDTH / 2 + 1.5, 0.6 + _PANEL_HEIGHT * len(series)),
-                         layout="constrained")
-    grid = figure.subplots(len(series), 1, sharex=True, squeeze=False)
-    for axes, (title, ylabel, values, labels) in zip(grid.flat, series):
-        _plot_series(axes, run.t, values, labels, title=title, ylabel=ylabel)
-    title = f"inverse dynamics: {', '.join(run.actuated)} prescribed, {len(run.t)} samples"
-    if not run.success:
-        title += f"\nFAILED {run.message}"
-    return _finish(figure, grid, title=title, failed=not run.success, units=units, path=path, show=show)
+    return _series_figure(run, series, f"inverse dynamics: forces on {', '.join(run.actuated)}, {len(run.t)} samples",
+                          units=units, path=path, show=show)

@@ -29,7 +29,7 @@ import numpy as np
 from scipy.integrate import DOP853
 
 from . import codegen
-from .numeric import AssemblyError, SingularConfigurationError, least_norm
+from .numeric import AssemblyError, SingularConfigurationError, least_norm, velocity_constraints
 from .tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
 from .trajectory import Result, SingularPassage, Trajectory
 
@@ -109,7 +109,7 @@ class MultibodyProblem:
         """Index-1 right-hand side ``[qd, qdd]`` with Baumgarte stabilization, shape (2 m,).
 
         ``qdd`` solves ``[[M, Phi_q^T, A^T], [Phi_q, 0, 0], [A, 0, 0]] [qdd; lam; mu] =
-        [f_Q - C qd - g; gamma - 2 alpha Phi_q qd - beta^2 Phi; gamma_nh - alpha (A qd + b)]``.
+        [f_Q - C qd - g; gamma - 2 alpha (Phi_q qd + Phi_t) - beta^2 Phi; gamma_nh - alpha (A qd + b)]``.
         """
         q, qd = y[:self.m], y[self.m:]
         result = self.model.forward_dynamics(q, qd, t, alpha=self.alpha, beta=self.beta)
@@ -126,7 +126,7 @@ class MultibodyProblem:
             q <- q - Phi_q^+ Phi(q)
 
         then velocities onto ``B qd + c = 0`` with ``B = [Phi_q; A]`` (r + s, m)
-        and ``c = [0; b]`` in one step, ``qd <- qd - B^+ (B qd + c)``.  The
+        and ``c = [Phi_t; b]`` in one step, ``qd <- qd - B^+ (B qd + c)``.  The
         pseudo-inverses (least squares, minimum norm) keep redundant
         constraints, a rank-deficient ``Phi_q``, working.
 
@@ -151,8 +151,7 @@ class MultibodyProblem:
             raise ProjectionError(f"the position projection did not converge at t = {t!r}: "
                                   f"max |Phi| = {np.max(np.abs(terms['Phi'])):.3g}")
         if model.r + model.s:
-            B = np.vstack([terms["Phi_q"], terms["A"]])
-            c = np.concatenate([np.zeros(model.r), terms["b"]])
+            B, c = velocity_constraints(terms)
             qd -= least_norm(B, B @ qd + c, rank_rtol=model.rank_rtol)
         return np.concatenate([q, qd])
 
@@ -431,7 +430,7 @@ class ProjectionSolver(Solver):
 
     Each accepted step of the explicit Runge-Kutta method is followed by
     :meth:`MultibodyProblem.project`: Gauss-Newton onto ``Phi(q) = 0``, then the
-    velocities onto ``Phi_q qd = 0``, ``A qd + b = 0``.  The method is one-step,
+    velocities onto ``Phi_q qd + Phi_t = 0``, ``A qd + b = 0``.  The method is one-step,
     so continuing from the projected state costs only one right-hand side (the
     first stage) and keeps the step size; outputs are interpolated and
     projected too (Hairer & Wanner, Solving ODEs II, Sec. VII.2).  The drift is
@@ -483,12 +482,12 @@ class _IDAStepper(_Stepper):
         model, m, r, s = self.problem.model, self.m, self.r, self.problem.model.s
         q, v = x[:m], x[m:2 * m]
         lam, mu, eta = x[2 * m:2 * m + r], x[2 * m + r:2 * m + r + s], x[2 * m + r + s:]
-        terms = model.dynamics_terms(q, v, t)  # M, h = f_Q - C v - g, Phi, Phi_q, A, b at (q, v)
+        terms = model.dynamics_terms(q, v, t)  # M, h = f_Q - C v - g, Phi, Phi_q, Phi_t, A, b at (q, v)
         Phi_q, A = terms["Phi_q"][self.rows], terms["A"]
         res[:m] = xp[:m] - v + Phi_q.T @ eta
         res[m:2 * m] = terms["M"] @ xp[m:2 * m] - terms["h"] + Phi_q.T @ lam + A.T @ mu
         res[2 * m:2 * m + r] = terms["Phi"][self.rows]
-        res[2 * m + r:2 * m + 2 * r] = Phi_q @ v
+        res[2 * m + r:2 * m + 2 * r] = Phi_q @ v + terms["Phi_t"][self.rows]
         res[2 * m + 2 * r:] = A @ v + terms["b"]
 
     def step(self) -> str | None:
@@ -940,7 +939,8 @@ def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray) -> dict
         terms = model.dynamics_terms(q, qd, t)
         derived["kinetic_energy"][k] = 0.5 * qd @ terms["M"] @ qd
         derived["position_residual"][k] = terms["Phi"]
-        derived["velocity_residual"][k] = np.concatenate([terms["Phi_q"] @ qd, terms["A"] @ qd + terms["b"]])
+        B, c = velocity_constraints(terms)
+        derived["velocity_residual"][k] = B @ qd + c
     return derived
 
 
@@ -980,7 +980,7 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
     q0, qd0 : array_like, shape (m,)
         Initial coordinates and velocities.  They should satisfy the
         constraints (``model.assemble`` finds such values); they are projected
-        onto ``Phi(q) = 0``, ``Phi_q qd = 0``, ``A qd + b = 0`` before starting.
+        onto ``Phi(q, t0) = 0``, ``Phi_q qd + Phi_t = 0``, ``A qd + b = 0`` before starting.
     method : {'auto', 'switching', 'ali3p', 'compiled', 'baumgarte', 'projection', 'ggl'}
         Formulation and integrator:
 

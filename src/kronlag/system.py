@@ -10,7 +10,8 @@ Coordinates ``q`` are plain SymPy symbols chosen by the user (a redundant set
 is allowed).  The speed and acceleration of a coordinate named ``x`` are the
 plain symbols ``xd`` and ``xdd`` (see :func:`speed_symbol`).  Every other
 symbol in the model must be declared as a parameter; the time symbol
-:data:`t` may appear in forces only.  Names are unique across coordinates,
+:data:`t` may appear in forces and in holonomic and nonholonomic constraints
+(drives: rheonomic constraints, see :meth:`System.add_drive`).  Names are unique across coordinates,
 speeds, accelerations, parameters, ``t`` and the multiplier symbols
 ``lambda1, lambda2, ...`` and ``mu1, mu2, ...`` that :func:`kronlag.derive`
 creates.
@@ -43,7 +44,7 @@ __all__ = [
     "System",
 ]
 
-#: The time symbol; allowed in applied forces and torques only.
+#: The time symbol; allowed in applied forces and torques and in constraints (drives).
 t = sp.Symbol("t")
 
 _MULTIPLIER_NAME = re.compile(r"^(lambda|mu)\d+$")
@@ -485,6 +486,7 @@ class System:
         self.traces: list[DrawingLine] = []
         self.points: dict = {}  # name -> kronlag.frames.BodyPoint
         self.joints: list = []  # kronlag.joints.Joint
+        self.drives: list[str] = []  # names of the constraints added by add_drive
         if gravity is not None:
             vector = _vector(gravity, "gravity", (2, 3))
             self._check_symbols(vector, "gravity", allow_q=False)
@@ -546,7 +548,7 @@ class System:
         elif symbol in self.speeds:
             reason = "may not depend on the speeds"
         elif symbol == t:
-            reason = "may not depend on time (only applied forces and torques may)"
+            reason = "may not depend on time (only applied forces, torques and constraints may)"
         elif symbol.name in {s.name for s in (*self.coordinates, *self.speeds, *self.parameters, t)}:
             reason = ("uses a symbol that has the name of a declared one but other assumptions"
                       " (use plain sp.Symbol(name))")
@@ -629,24 +631,67 @@ class System:
         return add_joint(self, kind, body_a, body_b, **geometry)
 
     def add_constraint(self, expression, *, name: str | None = None) -> None:
-        """Add a holonomic constraint ``f_j(q) = 0``."""
+        """Add a holonomic constraint ``f_j(q, t) = 0``.
+
+        A constraint that depends on the time :data:`t` is rheonomic (a drive, see
+        :meth:`add_drive`): its velocity and acceleration levels are
+        ``Phi_q qd + Phi_t = 0`` and ``Phi_q qdd = gamma`` with
+        ``gamma = -(dPhi_q/dt) qd - 2 Phi_qt qd - Phi_tt``.
+        """
         name = name or f"constraint {len(self.constraints) + 1}"
         self._unique(self.constraints, name, "constraint")
         expr = _scalar(expression, f"constraint {name!r}")
         if expr.free_symbols & set(self.speeds):
             raise ModelError(f"constraint {name!r} contains speeds; give a velocity constraint with "
                              "add_nonholonomic_constraint")
-        self._check_symbols(expr, f"constraint {name!r}")
+        self._check_symbols(expr, f"constraint {name!r}", allow_t=True)
         if not expr.free_symbols & set(self.coordinates):
             raise ModelError(f"constraint {name!r} does not depend on any coordinate: {expr}")
         self.constraints.append(_NamedExpression(name, expr))
+
+    def add_drive(self, target, motion, *, name: str | None = None) -> str:
+        """Prescribe ``target(q) = motion(t)``: the rheonomic constraint ``target - motion = 0``.
+
+        The drive's multiplier ``lambda_j`` is then its force: the generalized force
+        ``u = -lambda_j`` that the drive applies along ``target`` (a torque for an
+        angle, a force for a length); it appears by name among the reactions and in
+        :func:`kronlag.inverse_dynamics`.
+
+        Parameters
+        ----------
+        target : coordinate symbol, coordinate name or expression of q
+            What is driven: a coordinate, or e.g. a component of a point's position
+            (``system.point("P").position[0]``).
+        motion : expression of t and the parameters
+            Its prescribed value; differentiated twice symbolically.
+        name : str, optional
+            The constraint's name (default ``"drive <target>"``).
+
+        Returns
+        -------
+        str
+            The name of the drive's constraint.
+        """
+        by_name = {q.name: q for q in self.coordinates}
+        if isinstance(target, str):
+            if target not in by_name:
+                raise ModelError(f"drive of {target!r}: no such coordinate; coordinates are {list(by_name)}")
+            target = by_name[target]
+        what = f"drive {name!r}" if name else f"drive of {target}"
+        target = _scalar(target, what)
+        motion = _scalar(motion, f"{what} motion")
+        self._check_symbols(motion, f"{what} motion", allow_q=False, allow_t=True)
+        name = name or f"drive {target}"
+        self.add_constraint(target - motion, name=name)
+        self.drives.append(name)
+        return name
 
     def add_nonholonomic_constraint(self, expression, *, name: str | None = None) -> None:
         """Add a constraint ``A_k(q) qd + b_k(q) = 0`` given as an expression linear in ``qd``."""
         name = name or f"nonholonomic constraint {len(self.nonholonomic_constraints) + 1}"
         self._unique(self.nonholonomic_constraints, name, "nonholonomic constraint")
         expr = _scalar(expression, f"nonholonomic constraint {name!r}")
-        self._check_symbols(expr, f"nonholonomic constraint {name!r}", allow_qd=True)
+        self._check_symbols(expr, f"nonholonomic constraint {name!r}", allow_qd=True, allow_t=True)
         speeds = set(self.speeds)
         if not expr.free_symbols & speeds:
             raise ModelError(f"nonholonomic constraint {name!r} does not depend on any speed; "

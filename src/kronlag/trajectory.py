@@ -84,8 +84,32 @@ class SingularPassage:
                 f"{', '.join(self.constraints)}), q = {np.array2string(self.q, precision=6)}")
 
 
+class ColumnExport:
+    """Export of a result to files: a subclass defines ``columns()`` (named arrays of shape (N,))
+    and ``_metadata()`` (the run's message and counters)."""
+
+    def to_csv(self, path: str | PathLike) -> None:
+        """Write the columns to a comma-separated file with a one-line header of column names."""
+        columns = self.columns()
+        data = np.column_stack(list(columns.values())) if columns else np.zeros((0, 0))
+        np.savetxt(path, data, delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
+
+    def to_npz(self, path: str | PathLike) -> None:
+        """Write the columns and the run's metadata (``message``, ...) to a NumPy ``.npz`` archive."""
+        np.savez(path, **self.columns(), **{key: np.asarray(value) for key, value in self._metadata().items()})
+
+    def to_dataframe(self):
+        """The columns as a :class:`pandas.DataFrame` (needs pandas)."""
+        try:
+            import pandas as pd
+        except ImportError as error:
+            raise ImportError(f"{type(self).__name__}.to_dataframe needs pandas: pip install pandas "
+                              "(or kronlag[dataframe])") from error
+        return pd.DataFrame(self.columns())
+
+
 @dataclass(frozen=True, eq=False)
-class Trajectory:
+class Trajectory(ColumnExport):
     """Solution of the equations of motion at the output times (``N = len(t)``).
 
     Units are those of the model's parameters (SI if the user's are SI).
@@ -175,8 +199,8 @@ class Trajectory:
 
     @cached_property
     def nonconservative_work(self) -> np.ndarray:
-        """``W(t) = integral qd^T f_Q dt`` from ``t[0]``: the work of applied forces and torques,
-        dampers and generalized forces, shape (N,); see :mod:`kronlag.energy`."""
+        """``W(t) = integral qd^T (f_Q - Phi_q^T lambda - A^T mu) dt`` from ``t[0]``: the work of applied
+        forces and torques, dampers, generalized forces and drives, shape (N,); see :mod:`kronlag.energy`."""
         return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd)
 
     @property
@@ -223,28 +247,9 @@ class Trajectory:
         world or B's body components; see :mod:`kronlag.reactions`."""
         return joint_reaction(self.model, name, self.t, self.q, self.lam, frame=frame)
 
-    def to_csv(self, path: str | PathLike) -> None:
-        """Write the columns to a comma-separated file with a one-line header of column names."""
-        columns = self.columns()
-        data = np.column_stack(list(columns.values()))
-        np.savetxt(path, data, delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
-
-    def to_npz(self, path: str | PathLike) -> None:
-        """Write the columns, plus ``method``, ``status``, ``message``, ``nfev``, ``njev``,
-        ``steps`` and ``wall_time``, to a NumPy ``.npz`` archive (``numpy.load`` reads it)."""
-        metadata: dict[str, Any] = {"method": self.method, "status": self.status, "message": self.message,
-                                    "nfev": self.nfev, "njev": self.njev, "steps": self.steps,
-                                    "wall_time": self.wall_time}
-        np.savez(path, **self.columns(), **{key: np.asarray(value) for key, value in metadata.items()})
-
-    def to_dataframe(self):
-        """The columns as a :class:`pandas.DataFrame` (needs pandas)."""
-        try:
-            import pandas as pd
-        except ImportError as error:
-            raise ImportError("Trajectory.to_dataframe needs pandas: pip install pandas "
-                              "(or kronlag[dataframe])") from error
-        return pd.DataFrame(self.columns())
+    def _metadata(self) -> dict[str, Any]:
+        return {"method": self.method, "status": self.status, "message": self.message, "nfev": self.nfev,
+                "njev": self.njev, "steps": self.steps, "wall_time": self.wall_time}
 
     # -- graphics -----------------------------------------------------------------
 

@@ -1,17 +1,17 @@
-"""Whole tasks on a model file: check it, simulate it, run inverse dynamics along a
-prescribed motion.  The command-line interface is a thin shell over these.
+"""Whole tasks on a model file: check it, simulate it, analyse the kinematics and run inverse
+dynamics along prescribed motions.  The command-line interface is a thin shell over these.
 
-:func:`check_model` works on the symbolic equations alone; :func:`simulate_model`
-and :func:`inverse_dynamics_along` use the numeric layer
-(``Equations.numeric``, ``NumericModel.assemble`` / ``inverse_dynamics`` and
-:func:`kronlag.simulation.simulate`).
+:func:`check_model` works on the symbolic equations alone; :func:`simulate_model`,
+:func:`kinematics_along` and :func:`inverse_dynamics_along` use the numeric layer
+(``Equations.numeric``, :func:`kronlag.simulate`, :mod:`kronlag.drives`).
 """
 
 from __future__ import annotations
 
+import copy
 import re
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,10 +19,10 @@ import numpy as np
 import sympy as sp
 
 from .derivation import derive
+from .drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
 from .equations import Equations
 from .expressions import parse_expression
 from .modelfile import ModelFile
-from .reactions import reaction_columns
 from .system import ModelError, t
 
 if TYPE_CHECKING:
@@ -39,7 +39,8 @@ __all__ = [
     "SimulationSummary",
     "summarize",
     "parse_drive",
-    "InverseDynamicsRun",
+    "driven_model",
+    "kinematics_along",
     "inverse_dynamics_along",
 ]
 
@@ -295,133 +296,24 @@ def parse_drive(text: str, model: ModelFile) -> tuple[str, sp.Expr]:
     return name, parse_expression(expression, symbols, what=f"drive {name}")
 
 
-@dataclass
-class InverseDynamicsRun:
-    """Actuator forces and multipliers along a prescribed motion.
+def driven_model(model: ModelFile, drives: Mapping[str, sp.Expr]) -> NumericModel:
+    """The numeric model of ``model`` with ``drives`` (coordinate name -> motion, an expression of
+    ``t`` and the parameters) added as rheonomic constraints (:meth:`kronlag.System.add_drive`)."""
+    system = copy.deepcopy(model.system)
+    for coordinate, motion in drives.items():
+        system.add_drive(coordinate, motion)
+    return derive(system).numeric(model.numeric_values())
 
-    Attributes
-    ----------
-    actuated : tuple of str
-        The driven coordinates; ``forces[:, k]`` is the generalized force on ``actuated[k]``.
-    t : (N,) ; q, qd, qdd : (N, m) ; forces : (N, len(actuated)) ; lam : (N, r) ; mu : (N, s)
-        Rows up to the first failure (if any).
-    message : str
-        Empty on success; otherwise why the run stopped.
-    reactions : dict of str to (N,) arrays
-        The joints' reactions in world components, named as in
-        :func:`kronlag.reactions.reaction_columns` (``main_bearing.Fx``, ...).
-    """
 
-    actuated: tuple[str, ...]
-    coordinate_names: tuple[str, ...]
-    t: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    forces: np.ndarray
-    lam: np.ndarray
-    mu: np.ndarray
-    message: str = ""
-    reactions: dict[str, np.ndarray] = field(default_factory=dict)
-
-    @property
-    def success(self) -> bool:
-        """No failure along the motion."""
-        return not self.message
-
-    def columns(self) -> dict[str, np.ndarray]:
-        """``t``, coordinates, speeds, accelerations, ``force_<q>``, ``lambda<j>``, ``mu<k>``, then
-        the joints' reactions (``<joint>.Fx``, ...)."""
-        blocks = [(["t"], self.t[:, None]), (list(self.coordinate_names), self.q),
-                  ([f"{n}d" for n in self.coordinate_names], self.qd),
-                  ([f"{n}dd" for n in self.coordinate_names], self.qdd),
-                  ([f"force_{n}" for n in self.actuated], self.forces),
-                  ([f"lambda{j + 1}" for j in range(self.lam.shape[1])], self.lam),
-                  ([f"mu{k + 1}" for k in range(self.mu.shape[1])], self.mu)]
-        columns = {label: values[:, i] for labels, values in blocks for i, label in enumerate(labels)}
-        return columns | self.reactions
-
-    def save(self, path: str | Path) -> None:
-        """Write the columns to ``.csv`` or ``.npz`` (by the suffix)."""
-        path = Path(path)
-        columns = self.columns()
-        if path.suffix == ".npz":
-            np.savez(path, **columns, message=np.asarray(self.message))
-        elif path.suffix == ".csv":
-            np.savetxt(path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),
-                       comments="", fmt="%.17g")
-        else:
-            raise ModelError(f"{path}: inverse-dynamics results are written as .csv or .npz")
-
-    def report(self, *, rows: int = 11) -> str:
-        """A table of the forces and multipliers at up to ``rows`` evenly spaced times."""
-        columns = {k: v for k, v in self.columns().items() if k == "t" or k.startswith(("force_", "lambda", "mu"))}
-        picks = np.unique(np.linspace(0, len(self.t) - 1, min(rows, len(self.t))).round().astype(int)) \
-            if len(self.t) else []
-        lines = ["  ".join(f"{name:>12}" for name in columns)]
-        lines += ["  ".join(f"{values[i]:12.5g}" for values in columns.values()) for i in picks]
-        if self.forces.size:
-            peaks = ", ".join(f"{name} {np.max(np.abs(self.forces[:, k])):.5g}" for k, name in enumerate(self.actuated))
-            lines.append(f"max |force|: {peaks}")
-        if self.message:
-            lines.append(f"FAILED: {self.message}")
-        return "\n".join(lines)
+def kinematics_along(model: ModelFile, drives: Mapping[str, sp.Expr], times: Sequence[float] | np.ndarray) -> Kinematics:
+    """:func:`kronlag.kinematic_analysis` of ``model`` driven by ``drives`` (one per degree of
+    freedom), from the file's assembly guesses."""
+    return kinematic_analysis(driven_model(model, drives), times, model.guess_vectors()[0])
 
 
 def inverse_dynamics_along(model: ModelFile, drives: Mapping[str, sp.Expr], times: Sequence[float] | np.ndarray,
-                           *, numeric: NumericModel | None = None) -> InverseDynamicsRun:
-    """Forces on the driven coordinates, and multipliers, along a prescribed motion.
-
-    At each time the driven coordinates follow ``drives`` (expressions of
-    ``t`` and parameters) with their first and second derivatives; the other
-    coordinates and speeds come from assembly (starting from the file's guess,
-    then from the previous time), and the accelerations from the constraints at
-    acceleration level, ``Phi_q qdd = gamma``, ``A qdd = gamma_nh``.
-
-    Raises
-    ------
-    ModelError
-        The drives are not one per degree of freedom or name unknown coordinates.
-    """
-    from .numeric import AssemblyError, SingularConfigurationError
-
-    system = model.system
-    names = tuple(q.name for q in system.coordinates)
-    unknown = [name for name in drives if name not in names]
-    if unknown:
-        raise ModelError(f"drives name unknown coordinates: {', '.join(unknown)}")
-    if len(drives) != system.degrees_of_freedom:
-        raise ModelError(f"{system.name} has {system.degrees_of_freedom} degrees of freedom (m - r - s) "
-                         f"and needs as many drives, got {len(drives)}: {', '.join(drives) or 'none'}")
-    numeric = numeric if numeric is not None else numeric_model(model)
-    values = model.numeric_values()
-    constants = {sp.Symbol(name): value for name, value in values.items()}
-    motions = {name: [sp.lambdify(t, sp.diff(expr.xreplace(constants), t, order), "numpy") for order in range(3)]
-               for name, expr in drives.items()}
-    driven = [names.index(name) for name in drives]
-    selector = np.eye(len(names))[driven]
-    q_guess, qd_guess = (np.array(vector) for vector in model.guess_vectors())
-    rows: list[tuple] = []
-    message = ""
-    for time in np.asarray(times, dtype=float):
-        position = {name: float(motion[0](time)) for name, motion in motions.items()}
-        speed = {name: float(motion[1](time)) for name, motion in motions.items()}
-        acceleration = np.array([float(motions[name][2](time)) for name in drives])
-        for name, value in position.items():
-            q_guess[names.index(name)] = value
-        try:
-            q, qd = numeric.assemble(q_guess, fixed=position, qd_guess=qd_guess, qd_fixed=speed)
-            lhs = np.vstack([numeric.Phi_q(q, time), numeric.A(q, time), selector])
-            rhs = np.concatenate([numeric.gamma(q, qd, time), numeric.gamma_nh(q, qd, time), acceleration])
-            qdd = np.linalg.solve(lhs, rhs)
-            result = numeric.inverse_dynamics(q, qd, qdd, actuated=tuple(drives), t=time)
-        except (AssemblyError, SingularConfigurationError, np.linalg.LinAlgError) as error:
-            message = f"at t = {time:g}: {error}"
-            break
-        rows.append((time, q, qd, qdd, result.forces, result.lam, result.mu))
-        q_guess, qd_guess = q.copy(), qd.copy()
-    widths = ((), (numeric.m,), (numeric.m,), (numeric.m,), (len(drives),), (numeric.r,), (numeric.s,))
-    arrays = [np.array([row[k] for row in rows], dtype=float).reshape(len(rows), *width)
-              for k, width in enumerate(widths)]
-    reactions = reaction_columns(numeric, arrays[0], arrays[1], arrays[5])
-    return InverseDynamicsRun(tuple(drives), names, *arrays, message=message, reactions=reactions)
+                           *, actuated: Sequence[str] | None = None) -> InverseDynamicsRun:
+    """:func:`kronlag.inverse_dynamics` of ``model`` driven by ``drives``, with the actuators on the
+    coordinates ``actuated`` (default: the driven coordinates themselves)."""
+    return inverse_dynamics(driven_model(model, drives), times, model.guess_vectors()[0],
+                            actuated=tuple(drives) if actuated is None else tuple(actuated))

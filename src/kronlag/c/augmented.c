@@ -2,24 +2,25 @@
  * (see kronlag.numeric.solve_augmented for the algorithm, and tolerances.py for the rank policy). */
 
 /* Solve [[M, G^T], [G, 0]] [qdd; nu] = [h; c] with G = [Phi_q; A] (K x m), rank-revealing.
- * terms: the output of kronlag_dynamics (M, h, Phi, Phi_q, gamma, A, b, gamma_nh).
+ * terms: the output of kronlag_dynamics (the blocks of codegen.LAYOUTS["dynamics"]).
  * Returns 0, or 1 when M is not positive definite on the null space of G. */
 static int kronlag_solve(const double *terms, const double *qd, double alpha, double beta,
                          double *qdd, double *nu, int *rank)
 {
     enum { m = KRONLAG_M, r = KRONLAG_R, s = KRONLAG_S, k = KRONLAG_K };
     const double *M = terms + KRONLAG_DYNAMICS_M, *h = terms + KRONLAG_DYNAMICS_H, *Phi = terms + KRONLAG_DYNAMICS_PHI;
-    const double *Phi_q = terms + KRONLAG_DYNAMICS_PHI_Q, *gamma = terms + KRONLAG_DYNAMICS_GAMMA;
+    const double *Phi_q = terms + KRONLAG_DYNAMICS_PHI_Q, *Phi_t = terms + KRONLAG_DYNAMICS_PHI_T;
+    const double *gamma = terms + KRONLAG_DYNAMICS_GAMMA;
     const double *A = terms + KRONLAG_DYNAMICS_A, *b = terms + KRONLAG_DYNAMICS_B;
     const double *gamma_nh = terms + KRONLAG_DYNAMICS_GAMMA_NH;
     double X[m * (k + 1)], tau[k + 1], c[k + 1], B[m * m], y[m];
     int perm[k + 1];
-    /* X = G^T (m x k), c = [gamma - 2 alpha Phi_q qd - beta^2 Phi; gamma_nh - alpha (A qd + b)] */
+    /* X = G^T (m x k), c = [gamma - 2 alpha (Phi_q qd + Phi_t) - beta^2 Phi; gamma_nh - alpha (A qd + b)] */
     for (int j = 0; j < k; ++j) {
         const double *row = j < r ? Phi_q + j * m : A + (j - r) * m;
         double velocity = 0.0;
         for (int i = 0; i < m; ++i) { X[i * k + j] = row[i]; velocity += row[i] * qd[i]; }
-        c[j] = j < r ? gamma[j] - 2.0 * alpha * velocity - beta * beta * Phi[j]
+        c[j] = j < r ? gamma[j] - 2.0 * alpha * (velocity + Phi_t[j]) - beta * beta * Phi[j]
                      : gamma_nh[j - r] - alpha * (velocity + b[j - r]);
     }
     house_qr(X, m, k, k, perm, tau);

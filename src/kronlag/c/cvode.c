@@ -68,8 +68,8 @@ extern void CVodeFree(void **mem);
 enum { KL_M = KRONLAG_M, KL_R = KRONLAG_R, KL_S = KRONLAG_S, KL_N = 2 * KRONLAG_M,
        KL_K = KRONLAG_R + KRONLAG_S, KL_TERMS_ = KRONLAG_DYNAMICS_SIZE };
 enum { CV_ADAMS = 1, CV_ONE_STEP = 2 };
-enum { KL_PHI = KRONLAG_DYNAMICS_PHI, KL_PHI_Q = KRONLAG_DYNAMICS_PHI_Q, KL_A = KRONLAG_DYNAMICS_A,
-       KL_B = KRONLAG_DYNAMICS_B };
+enum { KL_PHI = KRONLAG_DYNAMICS_PHI, KL_PHI_Q = KRONLAG_DYNAMICS_PHI_Q, KL_PHI_T = KRONLAG_DYNAMICS_PHI_T,
+       KL_A = KRONLAG_DYNAMICS_A, KL_B = KRONLAG_DYNAMICS_B };
 #define KL_MAX_PROJECTION_ITERATIONS 8
 #define KL_STALL 1e-15  /* Gauss-Newton steps below KL_STALL (1 + |q|) end the iteration */
 #define KL_SETUP_FAILED (-1000)
@@ -102,7 +102,7 @@ static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
     return -1;
 }
 
-/* The constraint rows B = [Phi_q; A] (k x m) and offsets c = [0; b] at q. */
+/* The constraint rows B = [Phi_q; A] (k x m) and offsets c = [Phi_t; b] at (t, q): B qd + c = 0. */
 static void kl_constraints(double t, const double *q, const double *p, double *terms, double *B, double *c)
 {
     double zero[KL_M];
@@ -110,7 +110,7 @@ static void kl_constraints(double t, const double *q, const double *p, double *t
     kronlag_dynamics(t, q, zero, p, terms);
     memcpy(B, terms + KL_PHI_Q, KL_R * KL_M * sizeof(double));
     memcpy(B + KL_R * KL_M, terms + KL_A, KL_S * KL_M * sizeof(double));
-    for (int i = 0; i < KL_R; ++i) c[i] = 0.0;
+    for (int i = 0; i < KL_R; ++i) c[i] = terms[KL_PHI_T + i];
     for (int i = 0; i < KL_S; ++i) c[KL_R + i] = terms[KL_B + i];
 }
 

@@ -143,9 +143,9 @@ static int kl3_step(kl3_state *s, double t, double h, const double *q0, const do
     }
     memcpy(lam1, nu, r * sizeof(double));
     memcpy(a1, a, m * sizeof(double));
-    /* velocity projection (the terms are those of the converged q1, v1) */
+    /* velocity projection onto Phi_q v + Phi_t = 0 (the terms are those of the converged q1, v1) */
     for (int k = 0; k < r; ++k) {
-        double sum = 0.0;
+        double sum = s->terms[KRONLAG_DYNAMICS_PHI_T + k];
         for (int i = 0; i < m; ++i) sum += Phi_q[k * m + i] * v1[i];
         residual[k] = sum;
     }
@@ -170,7 +170,7 @@ static int kl3_step(kl3_state *s, double t, double h, const double *q0, const do
 
 /* Outputs at the state (t, q, v, a) (current: s->terms already hold its kernel values): y = [q, v],
  * qdd, the multipliers, kinetic and potential
- * energy, Phi (r) and Phi_q v (r).  The multipliers are the least-squares solution of
+ * energy, Phi (r) and Phi_q v + Phi_t (r).  The multipliers are the least-squares solution of
  * Phi_q^T lam = f_Q - C v - g - M a (the iteration's lam* + alpha Phi carries the rounding of
  * Phi times alpha). */
 static void kl3_output(kl3_state *s, int row, int current, double t, const double *q, const double *v,
@@ -201,7 +201,7 @@ static void kl3_output(kl3_state *s, int row, int current, double t, const doubl
     energies[2 * row] = 0.5 * kinetic;
     energies[2 * row + 1] = potential;
     for (int k = 0; k < r; ++k) {
-        double sum = 0.0;
+        double sum = s->terms[KRONLAG_DYNAMICS_PHI_T + k];
         for (int i = 0; i < m; ++i) sum += Phi_q[k * m + i] * v[i];
         velocity_out[row * r + k] = sum;
     }
