@@ -1,12 +1,14 @@
-"""Spatial RSSR linkage written as bodies + joints: the joint reactions over a revolution of the crank.
+"""Spatial RSSR linkage written as bodies + joints: the joint reactions of its free motion.
 
-A crank on a vertical hinge (``crank_bearing``) moves, through a coupler with a ball joint at
-each end (``ball_1``, ``ball_2``), a rocker on a horizontal hinge (``rocker_bearing``); the same
-linkage as in docs/joints.md.  Each body has its own position and Euler parameters.  The crank
-is started at 10 rad/s and the linkage moves freely under gravity (along -z) for about one
-revolution.  Writes ``rssr.png``: for every joint the force that its first body exerts on the
-second (world components and magnitude) and the couple (a hinge transmits none about its axis).
-Run: ``python3 examples/rssr.py``.
+A crank on a vertical hinge (``crank_bearing``) is joined, through a coupler with a ball joint
+at each end (``ball_1``, ``ball_2``), to a rocker on a horizontal hinge (``rocker_bearing``);
+the same linkage as in docs/joints.md.  Each body has its own position and Euler parameters.
+The crank is started at 10 rad/s and the linkage moves freely under gravity (along -z) for
+0.7 s.  With these lengths the crank cannot turn round (its tip cannot get far enough from the
+rocker): it swings between two limit positions, where crank and rocker turn back together and
+the joint forces peak.  Writes ``rssr.png``: for every joint the force that its first body
+exerts on the second (world components and magnitude) and the couple (ball joints transmit
+none, hinges none about their axes).  Run: ``python3 examples/rssr.py``.
 """
 
 import numpy as np
@@ -55,4 +57,4 @@ for joint in rssr.joints:
     reaction = trajectory.reaction(joint.name)
     print(f"{joint.name:>15}: max |F| = {np.max(np.linalg.norm(reaction.force, axis=1)):6.2f} N, "
           f"max |T| = {np.max(np.linalg.norm(reaction.torque, axis=1)):6.3f} N m")
-figure = trajectory.plot_reactions(path="rssr.png")
+figure = trajectory.plot_reactions(path="rssr.png", units={"t": "s", "energy": "J"})

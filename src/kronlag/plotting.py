@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from .trajectory import Trajectory
     from .workflows import InverseDynamicsRun
 
-__all__ = ["plot_trajectory", "plot_inverse_dynamics"]
+__all__ = ["plot_trajectory", "plot_joint_reactions", "plot_inverse_dynamics"]
 
 _PANEL_HEIGHT = 2.8  # inches per row of panels
 _FIGURE_WIDTH = 12.0
@@ -171,23 +171,26 @@ def _reaction_unit(kind: str, units: Mapping[str, str]) -> str | None:
     return _REACTION_UNITS[kind] if units.get("energy") == "J" else None
 
 
-def _reaction_force_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str], *, joint: Joint) -> None:
-    force = traj.reaction(joint.name).force
+def _reaction_force_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str], *, joint: Joint,
+                          frame: str = "world") -> None:
+    force = traj.reaction(joint.name, frame=frame).force
     labels = [f"$F_{axis}$" for axis in "xyz"[:force.shape[1]]] + ["$|F|$"]
+    where = "" if frame == "world" else f" ({joint.body_b} frame)"
     _plot_series(axes, traj.t, np.column_stack([force, np.linalg.norm(force, axis=1)]), labels,
-                 title=f"{joint.name}: force of {joint.body_a} on {joint.body_b}",
+                 title=f"{joint.name}: force of {joint.body_a} on {joint.body_b}{where}",
                  ylabel=_with_unit("force", _reaction_unit("force", units)),
                  styles={"$|F|$": {"color": "black", "linestyle": "--"}})
 
 
 def _reaction_couple_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str], *,
-                           joints: Sequence[Joint]) -> None:
+                           joints: Sequence[Joint], frame: str = "world",
+                           title: str = "Joint couples (on body B)") -> None:
     columns, labels = [], []
     for joint in joints:
-        torque = traj.reaction(joint.name).torque
+        torque = traj.reaction(joint.name, frame=frame).torque
         columns.append(torque)
         labels += [f"{joint.name} $M_{axis}$" for axis in ("z" if torque.shape[1] == 1 else "xyz")]
-    _plot_series(axes, traj.t, np.hstack(columns), labels, title="Joint couples (on body B)",
+    _plot_series(axes, traj.t, np.hstack(columns), labels, title=title,
                  ylabel=_with_unit("couple", _reaction_unit("couple", units)))
 
 
@@ -199,7 +202,7 @@ def _transmits_couple(joint: Joint) -> bool:
 def _selected_joints(traj: Trajectory, reactions: bool | Sequence[str] | None) -> list[Joint]:
     """The joints whose reactions ``reactions`` asks for (see :func:`plot_trajectory`)."""
     system = traj.model.equations.system
-    joints = {joint.name: joint for joint in getattr(system, "joints", ())}
+    joints = {joint.name: joint for joint in system.joints}
     if reactions is None or reactions is True:
         if reactions is True and not joints:
             raise ValueError(f"reactions=True: {system.name} has no joints (System.add_joint) to plot the "
@@ -316,6 +319,39 @@ def _finish(figure: Figure, grid: np.ndarray, *, used: int, title: str, failed: 
     if show:
         _pyplot().show()
     return figure
+
+
+def plot_joint_reactions(traj: Trajectory, joints: Sequence[str] | None = None, *, frame: str = "world",
+                         path: str | PathLike | None = None, show: bool = False,
+                         units: Mapping[str, str] | None = None) -> Figure:
+    """Plot the reactions of ``joints`` (default: every joint) over time, a row per joint: the force
+    ``F`` that body A exerts on body B at B's joint point and ``|F|`` on the left, the couple ``T``
+    on B on the right (:mod:`kronlag.reactions`), in world or B's body components (``frame``).
+
+    Options as for :func:`plot_trajectory`; returns the figure.
+
+    Raises
+    ------
+    ValueError
+        The system has no joints, or ``joints`` names one it does not have; ``frame`` is not
+        ``"world"`` or ``"body"``.
+    """
+    if frame not in ("world", "body"):
+        raise ValueError(f"frame must be 'world' or 'body', got {frame!r}")
+    units = dict(units or {})
+    selected = _selected_joints(traj, True if joints is None else joints)
+    if not selected:
+        raise ValueError("joints: give at least one joint name (or None for every joint)")
+    figure = _new_figure(show=show, figsize=(_FIGURE_WIDTH, 0.6 + _PANEL_HEIGHT * len(selected)),
+                         layout="constrained")
+    grid = figure.subplots(len(selected), 2, sharex=True, squeeze=False)
+    for (forces, couples), joint in zip(grid, selected):
+        _reaction_force_panel(forces, traj, units, joint=joint, frame=frame)
+        _reaction_couple_panel(couples, traj, units, joints=[joint], frame=frame,
+                               title=f"{joint.name}: couple on {joint.body_b}")
+    title = f"{traj.model.equations.system.name}: joint reactions ({frame} components)"
+    return _finish(figure, grid, used=grid.size, title=title, failed=traj.status != 0, units=units, path=path,
+                   show=show)
 
 
 def _joint_force_magnitudes(columns: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
