@@ -2,9 +2,11 @@
 
 :func:`plot_trajectory` draws, in one figure, the coordinates ``q``, the
 velocities ``qd``, the multipliers ``lambda`` / ``mu``, the energies, the
-constraint drift and the named reactions of the joints.  matplotlib is imported only when a plot is made; figures
-that are not shown are plain :class:`matplotlib.figure.Figure` objects that
-need no GUI backend, so plotting works on machines without a display.
+constraint drift and the named reactions of the joints
+(:func:`plot_joint_reactions`: the reactions alone).  matplotlib is imported
+only when a plot is made; figures that are not shown are plain
+:class:`matplotlib.figure.Figure` objects that need no GUI backend, so
+plotting works on machines without a display.
 """
 
 from __future__ import annotations
@@ -220,7 +222,7 @@ def _selected_joints(traj: Trajectory, reactions: bool | Sequence[str] | None) -
     return [joints[name] for name in reactions]
 
 
-def _panels(traj: Trajectory, reactions: bool | Sequence[str] | None = None,
+def _panels(traj: Trajectory, reactions: bool | Sequence[str] | None
             ) -> list[Callable[[Axes, Trajectory, Mapping[str, str]], None]]:
     """The panels to draw: multipliers and constraint drift only for a constrained model, then a
     force panel per selected joint and one panel of the couples of those that transmit one."""
@@ -336,8 +338,6 @@ def plot_joint_reactions(traj: Trajectory, joints: Sequence[str] | None = None, 
         The system has no joints, or ``joints`` names one it does not have; ``frame`` is not
         ``"world"`` or ``"body"``.
     """
-    if frame not in ("world", "body"):
-        raise ValueError(f"frame must be 'world' or 'body', got {frame!r}")
     units = dict(units or {})
     selected = _selected_joints(traj, True if joints is None else joints)
     if not selected:
