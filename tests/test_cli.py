@@ -452,3 +452,17 @@ def test_singular_configuration_is_explained(capsys, tmp_path, monkeypatch):
     code, _, err = run(capsys, "simulate", write_model(tmp_path, text, "top.toml"), "--t-end", "0.1")
     assert code == 1
     assert "singular configuration" in err and f"saved in {tmp_path / 'heavy_top-trajectory.npz'}" in err
+
+
+def test_inverse_five_bar_reports_the_motor_torques_and_joint_forces(capsys, tmp_path):
+    """Held at rest in its symmetric pose, the robot needs mirror-image torques at its two base joints."""
+    table = tmp_path / "five_bar.csv"
+    code, out, err = run(capsys, "inverse", "five_bar", "--drive", "theta1=2*pi/3", "--drive", "theta2=pi/3",
+                         "--points", "2", "--output", table)
+    assert code == 0, err
+    assert out.split()[:3] == ["t", "force_theta1", "force_theta2"]
+    data = np.genfromtxt(table, delimiter=",", names=True)
+    assert data["force_theta1"][0] == pytest.approx(-data["force_theta2"][0], rel=1e-9)
+    assert abs(data["force_theta1"][0]) > 0.1
+    assert np.hypot(data["elbow_1Fx"], data["elbow_1Fy"]) == pytest.approx(np.hypot(data["elbow_2Fx"],
+                                                                                     data["elbow_2Fy"]))
