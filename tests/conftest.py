@@ -21,6 +21,7 @@ MODEL_BUILDERS = {
     "double_pendulum": models.double_pendulum,
     "slider_crank": models.slider_crank,
     "slider_crank_engine": models.slider_crank_engine,
+    "five_bar": models.five_bar,
     "heavy_top": models.heavy_top,
     "chaplygin_sleigh": models.chaplygin_sleigh,
     "closed_chain_4_absolute": functools.partial(models.closed_chain, 4, "absolute"),

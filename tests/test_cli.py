@@ -155,6 +155,32 @@ def test_simulate_writes_trajectory_and_figure(capsys, tmp_path):
     assert figure.stat().st_size > 0
 
 
+def test_simulate_reports_saves_and_plots_the_joint_reactions(capsys, tmp_path):
+    csv, figure = tmp_path / "engine.csv", tmp_path / "engine.png"
+    code, out, err = run(capsys, "simulate", "slider_crank_engine", "--t-end", "0.005", "--points", "11",
+                         "--output", csv, "--plot", figure, "--reactions", "main_bearing, cylinder")
+    assert code == 0, err
+    line = next(line for line in out.splitlines() if line.startswith("max joint force |F|:"))
+    assert [entry.split()[0] for entry in line.removeprefix("max joint force |F|:").split(",")] == [
+        "main_bearing", "crank_pin", "wrist_pin", "cylinder"]
+    table = np.genfromtxt(csv, delimiter=",", names=True)
+    largest = np.max(np.hypot(table["main_bearingFx"], table["main_bearingFy"]))
+    assert f"main_bearing {largest:.5g}," in line
+    assert Image.open(figure).size[1] > 1000  # six rows of panels: the two joints' and the couple's
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--plot", "{tmp}/fig.png", "--reactions", "main,crank_pin"],
+     "--reactions: no joint named 'main' in model 'slider_crank_engine' (joints: main_bearing, crank_pin, "),
+    (["--reactions", "all"], "--reactions selects what --plot draws: give --plot FILE too"),
+])
+def test_reaction_selection_is_checked_before_the_run(capsys, tmp_path, options, message):
+    code, out, err = run(capsys, "simulate", "slider_crank_engine",
+                         *[option.format(tmp=tmp_path) for option in options])
+    assert code == 2 and message in err and not out
+    assert not (tmp_path / "fig.png").exists()
+
+
 def test_simulate_npz_from_file_settings(capsys, tmp_path):
     target = tmp_path / "traj.npz"
     code, _, err = run(capsys, "simulate", example_path("chaplygin_sleigh"), "--t-end", "0.5", "--method",
@@ -426,3 +452,17 @@ def test_singular_configuration_is_explained(capsys, tmp_path, monkeypatch):
     code, _, err = run(capsys, "simulate", write_model(tmp_path, text, "top.toml"), "--t-end", "0.1")
     assert code == 1
     assert "singular configuration" in err and f"saved in {tmp_path / 'heavy_top-trajectory.npz'}" in err
+
+
+def test_inverse_five_bar_reports_the_motor_torques_and_joint_forces(capsys, tmp_path):
+    """Held at rest in its symmetric pose, the robot needs mirror-image torques at its two base joints."""
+    table = tmp_path / "five_bar.csv"
+    code, out, err = run(capsys, "inverse", "five_bar", "--drive", "theta1=2*pi/3", "--drive", "theta2=pi/3",
+                         "--points", "2", "--output", table)
+    assert code == 0, err
+    assert out.split()[:3] == ["t", "force_theta1", "force_theta2"]
+    data = np.genfromtxt(table, delimiter=",", names=True)
+    assert data["force_theta1"][0] == pytest.approx(-data["force_theta2"][0], rel=1e-9)
+    assert abs(data["force_theta1"][0]) > 0.1
+    assert np.hypot(data["elbow_1Fx"], data["elbow_1Fy"]) == pytest.approx(np.hypot(data["elbow_2Fx"],
+                                                                                     data["elbow_2Fy"]))

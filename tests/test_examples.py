@@ -19,4 +19,4 @@ def test_example_script_writes_its_plot(script, tmp_path, monkeypatch):
 def test_there_is_a_script_per_shipped_model():
     from kronlag.modelfile import example_names
 
-    assert {path.stem for path in EXAMPLES} == set(example_names())
+    assert set(example_names()) <= {path.stem for path in EXAMPLES}

@@ -31,6 +31,7 @@ EXAMPLES = {
     "double_pendulum": "double_pendulum",
     "slider_crank": "slider_crank",
     "slider_crank_engine": "slider_crank_engine",
+    "five_bar": "five_bar",
     "heavy_top": "heavy_top",
     "chaplygin_sleigh": "chaplygin_sleigh",
     "closed_chain_4": "closed_chain_4_absolute",

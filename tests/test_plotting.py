@@ -117,3 +117,70 @@ def test_inverse_dynamics_figure():
     np.testing.assert_array_equal(figure.axes[1].lines[0].get_ydata(), np.sin(t))
     np.testing.assert_array_equal(figure.axes[0].lines[0].get_ydata(), t)
     assert figure.axes[-1].get_xlabel() == "time $t$ (s)"
+
+
+@pytest.fixture(scope="module")
+def engine():
+    """The slider-crank engine (bodies + four named joints) over a few milliseconds."""
+    import kronlag
+    from kronlag.modelfile import load_example
+
+    engine = load_example("slider_crank_engine")
+    model = kronlag.derive(engine.system).numeric(engine.numeric_values(), backend="python")
+    q_guess, qd_guess = engine.guess_vectors()
+    q0, qd0 = model.assemble(q_guess, fixed={"theta_crank": 0.0}, qd_guess=qd_guess, qd_fixed={"theta_crank": 157.0})
+    return kronlag.simulate(model, (0, 0.005), q0, qd0, method="projection", t_eval=np.linspace(0, 0.005, 11))
+
+
+ENGINE_JOINTS = ["main_bearing", "crank_pin", "wrist_pin", "cylinder"]
+
+
+def test_joint_reactions_have_a_panel_each_and_couples_share_one(engine):
+    figure = engine.plot(units={"t": "s", "energy": "J"})
+    titles = _titles(figure)
+    assert titles[:6] == CONSTRAINED_PANELS
+    assert titles[6:] == ["main_bearing: force of ground on crank", "crank_pin: force of crank on rod",
+                          "wrist_pin: force of rod on piston", "cylinder: force of ground on piston",
+                          "Joint couples (on body B)"]
+    panels = dict(zip(titles, figure.axes))
+    main = panels["main_bearing: force of ground on crank"]
+    assert _legend_labels(main) == ["$F_x$", "$F_y$", "$|F|$"]
+    assert main.get_ylabel() == "force (N)"
+    force = engine.reaction("main_bearing").force
+    np.testing.assert_array_equal(main.lines[0].get_ydata(), force[:, 0])
+    np.testing.assert_allclose(main.lines[2].get_ydata(), np.hypot(force[:, 0], force[:, 1]))
+    # revolute joints in the plane transmit no couple: only the prismatic cylinder has one
+    couples = panels["Joint couples (on body B)"]
+    assert _legend_labels(couples) == ["cylinder $M_z$"] and couples.get_ylabel() == "couple (N*m)"
+    # 11 panels on a 6 x 2 grid: the empty cell is removed, the lowest axes of each column carry the time
+    assert len(figure.axes) == 11
+    assert [axes.get_xlabel() for axes in (figure.axes[-1], figure.axes[-2])] == ["time $t$ (s)"] * 2
+
+
+def test_reactions_are_selected_by_joint_name(engine):
+    assert len(plot_trajectory(engine, reactions=False).axes) == 6
+    assert _titles(plot_trajectory(engine, reactions=["crank_pin"]))[6:] == ["crank_pin: force of crank on rod"]
+    assert len(plot_trajectory(engine, reactions=True).axes) == 11
+    with pytest.raises(ValueError, match=r"no joint named 'crank' in slider_crank_engine \(joints: main_bearing, "):
+        plot_trajectory(engine, reactions=["crank"])
+    with pytest.raises(TypeError, match=r"write \['cylinder'\]"):
+        plot_trajectory(engine, reactions="cylinder")
+
+
+def test_reactions_true_needs_joints(four_bar):
+    with pytest.raises(ValueError, match="four_bar has no joints"):
+        plot_trajectory(four_bar, reactions=True)
+    assert len(plot_trajectory(four_bar).axes) == 6
+
+
+def test_inverse_dynamics_figure_shows_the_joint_forces():
+    t = np.linspace(0.0, 1.0, 11)
+    q = np.column_stack([t, 2 * t])
+    run = InverseDynamicsRun(actuated=("a",), coordinate_names=("a", "x"), t=t, q=q, qd=np.ones_like(q),
+                             qdd=np.zeros_like(q), forces=np.sin(t)[:, None], lam=np.cos(t)[:, None],
+                             mu=np.zeros((11, 0)),
+                             reactions={"pin.Fx": 3 * t, "pin.Fy": 4 * t, "pin.Mz": 0 * t})
+    figure = plot_inverse_dynamics(run, units={"a": "rad", "t": "s", "energy": "J"})
+    assert _titles(figure)[-1] == "Joint reaction forces"
+    assert _legend_labels(figure.axes[-1]) == ["pin"] and figure.axes[-1].get_ylabel() == "$|F|$ (N)"
+    np.testing.assert_allclose(figure.axes[-1].lines[0].get_ydata(), 5 * t)

@@ -150,5 +150,5 @@ def test_reaction_plot_has_a_row_per_joint(tmp_path):
     assert len(figure.axes) == 2 * len(model.equations.system.joints)
     assert (tmp_path / "reactions.png").stat().st_size > 10_000
     assert len(trajectory.plot_reactions(["crank_coupler_revolute"], frame="body").axes) == 2
-    with pytest.raises(KeyError, match="no joint named"):
+    with pytest.raises(ValueError, match="no joint named 'crank'"):
         trajectory.plot_reactions(["crank"])

@@ -97,8 +97,32 @@ def _save_columns(run, path: Path, arguments: argparse.Namespace, model: ModelFi
     {".csv": lambda: run.to_csv(path), ".npz": lambda: run.to_npz(path)}[path.suffix]()
 
 
+#: The words ``--reactions`` takes besides joint names, as ``plot_trajectory(reactions=...)`` values.
+_REACTION_WORDS = {"all": True, "none": False}
+
+
+def _reaction_selection(arguments: argparse.Namespace) -> bool | list[str] | None:
+    """``--reactions`` as :func:`kronlag.plotting.plot_trajectory` takes it: every joint (not given, or
+    ``all``), none, or the joints named (separated by commas)."""
+    text = arguments.reactions
+    if text is None or text in _REACTION_WORDS:
+        return _REACTION_WORDS.get(text)
+    return [name.strip() for name in text.split(",")]
+
+
+def _check_reactions(path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    joints = [joint.name for joint in model.system.joints]
+    selection = _reaction_selection(arguments)
+    if selection is True and not joints:
+        raise ModelError(f"--reactions all: model {model.system.name!r} has no [[joints]]")
+    unknown = [name for name in selection if name not in joints] if isinstance(selection, list) else []
+    if unknown:
+        raise ModelError(f"--reactions: no joint named {', '.join(map(repr, unknown))} in model "
+                         f"{model.system.name!r} (joints: {', '.join(joints) or 'none'})")
+
+
 def _plot_trajectory(trajectory, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
-    trajectory.plot(path=path, units=model_units(model))
+    trajectory.plot(path=path, units=model_units(model), reactions=_reaction_selection(arguments))
 
 
 def _animate(trajectory, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
@@ -123,7 +147,7 @@ def _plot_kinematics(run, path: Path, arguments: argparse.Namespace, model: Mode
 
 _PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg")
 _SIMULATION_OUTPUTS = (_OutputKind("--output", (".csv", ".npz", ".parquet"), _check_parquet, _save_trajectory),
-                       _OutputKind("--plot", _PLOT_SUFFIXES, _no_check, _plot_trajectory),
+                       _OutputKind("--plot", _PLOT_SUFFIXES, _check_reactions, _plot_trajectory),
                        _OutputKind("--animate", SUPPORTED_FORMATS, _check_animation, _animate))
 _INVERSE_OUTPUTS = (_OutputKind("--output", (".csv", ".npz"), _no_check, _save_columns),
                     _OutputKind("--plot", _PLOT_SUFFIXES, _no_check, _plot_inverse))
@@ -287,6 +311,8 @@ def _failure_hint(message: str) -> str:
 
 def _simulate(arguments: argparse.Namespace) -> None:
     model = resolve_model(arguments.model)
+    if arguments.reactions is not None and arguments.plot is None:
+        raise ModelError("--reactions selects what --plot draws: give --plot FILE too")
     outputs = _requested_outputs(_SIMULATION_OUTPUTS, arguments, model)
     t_end = arguments.t_end if arguments.t_end is not None else model.simulation.t_end
     bar = ProgressBar(t_end, sys.stderr)
@@ -397,7 +423,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_grid_options(sub, f"a point every {_GRID_SPACING:g} of time, at least {_GRID_POINTS[0]} and at most "
                            f"{_GRID_POINTS[1]} points")
     sub.add_argument("--output", metavar="FILE", help="save the trajectory (.csv, .npz or .parquet)")
-    sub.add_argument("--plot", metavar="FILE", help="save a figure of the time histories (.png, .pdf, .svg, .jpg)")
+    sub.add_argument("--plot", metavar="FILE", help="save a figure of the time histories (.png, .pdf, .svg, .jpg), "
+                     "with the reaction forces of the joints")
+    sub.add_argument("--reactions", metavar="JOINTS", help="joints whose reactions --plot draws: all (default), "
+                     "none, or names separated by commas (--output always has every joint's columns)")
     sub.add_argument("--animate", metavar="FILE", help="save an animation (.gif, .mp4 or .html)")
     sub.add_argument("--fps", type=_positive, default=25.0,
                      help="animation frames per second (default: 25; a GIF plays at most 50)")

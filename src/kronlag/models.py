@@ -20,6 +20,7 @@ __all__ = [
     "double_pendulum",
     "slider_crank",
     "slider_crank_engine",
+    "five_bar",
     "heavy_top",
     "chaplygin_sleigh",
     "pendulum_cartesian",
@@ -209,6 +210,47 @@ def slider_crank_engine() -> System:
     system.add_torque("crank", tau, name="drive")
     system.add_drawing_line([system.point(name).position for name in ("main", "crank_pin", "wrist")],
                             name="engine")
+    return system
+
+
+def five_bar() -> System:
+    """Planar five-bar (5R) parallel robot: two actuated base joints and a closed chain.
+
+    The base joints sit at ``(-d/2, 0)`` and ``(d/2, 0)``; the proximal links
+    ``proximal_1``, ``proximal_2`` (length ``l1``, mass ``m1``, central inertia
+    ``I1``) turn about them by the joint angles ``theta1``, ``theta2`` (from the
+    x axis, the actuated coordinates, each driven by its motor torque ``tau1``,
+    ``tau2``); the distal links ``distal_1``, ``distal_2`` (``l2``, ``m2``,
+    ``I2``) have their own coordinates ``x_distal_k, y_distal_k, theta_distal_k``
+    (centre of mass, angle) and meet at the end effector.  Gravity ``g`` along -y.
+
+    Coordinates, in this order: ``theta1, theta2, x_distal_1, y_distal_1,
+    theta_distal_1, x_distal_2, y_distal_2, theta_distal_2`` (m = 8); revolute
+    joints ``elbow_1`` (proximal_1-distal_1), ``elbow_2`` (proximal_2-distal_2) and
+    ``tip`` (distal_1-distal_2), 6 constraints, 2 degrees of freedom.  Named
+    points: ``base_1``, ``base_2`` (ground), ``elbow_1``, ``elbow_2`` (the
+    proximal links' outer ends) and ``end_effector`` (the outer end of distal_1,
+    where ``tip`` joins distal_2).
+    """
+    theta1, theta2 = coordinates("theta1 theta2")
+    d, l1, l2, m1, m2, I1, I2, g, tau1, tau2 = sp.symbols("d l1 l2 m1 m2 I1 I2 g tau1 tau2")
+    distal = [free_body(f"distal_{k}", mass=m2, inertia=I2) for k in (1, 2)]
+    system = System([theta1, theta2, *distal[0].coordinates, *distal[1].coordinates],
+                    parameters=[d, l1, l2, m1, m2, I1, I2, g, tau1, tau2], gravity=(0, -g), name="five_bar")
+    for k, (angle, base, torque) in enumerate(((theta1, -d / 2, tau1), (theta2, d / 2, tau2)), start=1):
+        system.add_body(_bar(f"proximal_{k}", m1, I1, (base, 0), l1, angle))
+        system.add_point(f"base_{k}", "ground", (base, 0))
+        system.add_point(f"elbow_{k}", f"proximal_{k}", (l1 / 2, 0))
+        system.add_torque(f"proximal_{k}", torque, name=f"motor_{k}")
+    for free in distal:
+        system.add_body(free.body)
+    system.add_point("end_effector", "distal_1", (l2 / 2, 0))
+    system.add_joint("revolute", "proximal_1", "distal_1", at_a="elbow_1", at_b=(-l2 / 2, 0), name="elbow_1")
+    system.add_joint("revolute", "proximal_2", "distal_2", at_a="elbow_2", at_b=(-l2 / 2, 0), name="elbow_2")
+    system.add_joint("revolute", "distal_1", "distal_2", at_a="end_effector", at_b=(l2 / 2, 0), name="tip")
+    system.add_drawing_line([system.point(name).position
+                             for name in ("base_1", "elbow_1", "end_effector", "elbow_2", "base_2")], name="robot")
+    system.add_trace(system.point("end_effector").position, name="end effector")
     return system
 
 
@@ -644,6 +686,7 @@ BUILTIN_MODELS: dict[str, Callable[[], System]] = {
     "double_pendulum": double_pendulum,
     "slider_crank": slider_crank,
     "slider_crank_engine": slider_crank_engine,
+    "five_bar": five_bar,
     "heavy_top": heavy_top,
     "chaplygin_sleigh": chaplygin_sleigh,
     "pendulum_cartesian": pendulum_cartesian,

@@ -1,14 +1,17 @@
 """Time-history plots of a :class:`~kronlag.trajectory.Trajectory`.
 
 :func:`plot_trajectory` draws, in one figure, the coordinates ``q``, the
-velocities ``qd``, the multipliers ``lambda`` / ``mu``, the energies and the
-constraint drift.  matplotlib is imported only when a plot is made; figures
-that are not shown are plain :class:`matplotlib.figure.Figure` objects that
-need no GUI backend, so plotting works on machines without a display.
+velocities ``qd``, the multipliers ``lambda`` / ``mu``, the energies, the
+constraint drift and the named reactions of the joints
+(:func:`plot_joint_reactions`: the reactions alone).  matplotlib is imported
+only when a plot is made; figures that are not shown are plain
+:class:`matplotlib.figure.Figure` objects that need no GUI backend, so
+plotting works on machines without a display.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 from collections.abc import Callable, Mapping, Sequence
@@ -23,10 +26,11 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from .trajectory import Trajectory
     from .drives import InverseDynamicsRun, Kinematics
+    from .joints import Joint
+    from .trajectory import Trajectory
 
-__all__ = ["plot_trajectory", "plot_kinematics", "plot_inverse_dynamics"]
+__all__ = ["plot_trajectory", "plot_joint_reactions", "plot_kinematics", "plot_inverse_dynamics"]
 
 _PANEL_HEIGHT = 2.8  # inches per row of panels
 _FIGURE_WIDTH = 12.0
@@ -82,10 +86,11 @@ def _math_label(name: str, *, dotted: bool = False) -> str:
 
 
 def _plot_series(axes: Axes, time: np.ndarray, values: np.ndarray, labels: Sequence[str], *,
-                 title: str, ylabel: str) -> None:
-    """One line per column of ``values`` against ``time``, with a legend beside the axes."""
+                 title: str, ylabel: str, styles: Mapping[str, Mapping[str, str]] | None = None) -> None:
+    """One line per column of ``values`` against ``time``, with a legend beside the axes;
+    ``styles`` gives line options (``color``, ``linestyle``) by label."""
     for column, label in zip(values.T, labels):
-        axes.plot(time, column, label=label, linewidth=1.3)
+        axes.plot(time, column, label=label, linewidth=1.3, **(styles or {}).get(label, {}))
     axes.set_title(title)
     axes.set_ylabel(ylabel)
     axes.grid(True, alpha=0.3)
@@ -160,13 +165,78 @@ def _constraint_drift_panel(axes: Axes, traj: Trajectory, units: Mapping[str, st
                   va="center", color="0.4")
 
 
-def _panels(traj: Trajectory) -> list[Callable[[Axes, Trajectory, Mapping[str, str]], None]]:
-    """The panels to draw: multipliers and constraint drift only for a constrained model."""
+#: Units of a reaction's force and couple in a model whose energy is in J.
+_REACTION_UNITS = {"force": "N", "couple": "N*m"}
+
+
+def _reaction_unit(kind: str, units: Mapping[str, str]) -> str | None:
+    return _REACTION_UNITS[kind] if units.get("energy") == "J" else None
+
+
+def _reaction_force_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str], *, joint: Joint,
+                          frame: str = "world") -> None:
+    force = traj.reaction(joint.name, frame=frame).force
+    labels = [f"$F_{axis}$" for axis in "xyz"[:force.shape[1]]] + ["$|F|$"]
+    where = "" if frame == "world" else f" ({joint.body_b} frame)"
+    _plot_series(axes, traj.t, np.column_stack([force, np.linalg.norm(force, axis=1)]), labels,
+                 title=f"{joint.name}: force of {joint.body_a} on {joint.body_b}{where}",
+                 ylabel=_with_unit("force", _reaction_unit("force", units)),
+                 styles={"$|F|$": {"color": "black", "linestyle": "--"}})
+
+
+def _reaction_couple_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str], *,
+                           joints: Sequence[Joint], frame: str = "world",
+                           title: str = "Joint couples (on body B)") -> None:
+    columns, labels = [], []
+    for joint in joints:
+        torque = traj.reaction(joint.name, frame=frame).torque
+        columns.append(torque)
+        labels += [f"{joint.name} $M_{axis}$" for axis in ("z" if torque.shape[1] == 1 else "xyz")]
+    _plot_series(axes, traj.t, np.hstack(columns), labels, title=title,
+                 ylabel=_with_unit("couple", _reaction_unit("couple", units)))
+
+
+def _transmits_couple(joint: Joint) -> bool:
+    """Whether the joint's reaction has a couple (``T`` rows of its wrench map not all zero)."""
+    return any(entry != 0 for entry in joint.wrench[joint.dimension:, :])
+
+
+def _selected_joints(traj: Trajectory, reactions: bool | Sequence[str] | None) -> list[Joint]:
+    """The joints whose reactions ``reactions`` asks for (see :func:`plot_trajectory`)."""
+    system = traj.model.equations.system
+    joints = {joint.name: joint for joint in system.joints}
+    if reactions is None or reactions is True:
+        if reactions is True and not joints:
+            raise ValueError(f"reactions=True: {system.name} has no joints (System.add_joint) to plot the "
+                             "reactions of")
+        return list(joints.values())
+    if reactions is False:
+        return []
+    if isinstance(reactions, str):
+        raise TypeError(f"reactions must be a list of joint names, None, True or False, got the string "
+                        f"{reactions!r} (write [{reactions!r}])")
+    unknown = [name for name in reactions if name not in joints]
+    if unknown:
+        raise ValueError(f"reactions: no joint named {', '.join(map(repr, unknown))} in {system.name} "
+                         f"(joints: {', '.join(joints) or 'none'})")
+    return [joints[name] for name in reactions]
+
+
+def _panels(traj: Trajectory, reactions: bool | Sequence[str] | None
+            ) -> list[Callable[[Axes, Trajectory, Mapping[str, str]], None]]:
+    """The panels to draw: multipliers and constraint drift only for a constrained model, then a
+    force panel per selected joint and one panel of the couples of those that transmit one."""
     constrained = traj.lam.shape[1] + traj.mu.shape[1] > 0
     panels = [_coordinates_panel, _velocities_panel]
     if constrained:
         panels += [_multipliers_panel, _constraint_drift_panel]
-    return panels + [_energy_panel, _energy_drift_panel]
+    panels += [_energy_panel, _energy_drift_panel]
+    joints = _selected_joints(traj, reactions)
+    panels += [functools.partial(_reaction_force_panel, joint=joint) for joint in joints]
+    couples = [joint for joint in joints if _transmits_couple(joint)]
+    if couples:
+        panels.append(functools.partial(_reaction_couple_panel, joints=couples))
+    return panels
 
 
 def _title(traj: Trajectory) -> str:
@@ -178,16 +248,21 @@ def _title(traj: Trajectory) -> str:
 
 
 def plot_trajectory(traj: Trajectory, *, path: str | PathLike | None = None, show: bool = False,
-                    units: Mapping[str, str] | None = None) -> Figure:
+                    units: Mapping[str, str] | None = None,
+                    reactions: bool | Sequence[str] | None = None) -> Figure:
     """Plot the time histories of a trajectory in one figure.
 
     Panels (sharing the time axis): coordinates ``q``; velocities ``qd``;
     multipliers ``lambda1 ..`` and ``mu1 ..`` and the constraint drift
     ``||Phi(q)||``, ``||[Phi_q qd; A qd + b]||`` on a log scale (both only if
-    the model has constraints); kinetic, potential and total energy; and the
+    the model has constraints); kinetic, potential and total energy; the
     total-energy drift ``E(t) - E(t0)`` (a conservation check for models
-    without driving or dissipative forces).  A failed integration is flagged
-    in the title.
+    without driving or dissipative forces); then the named reactions of the
+    joints (:meth:`kronlag.System.add_joint`, :mod:`kronlag.reactions`): a
+    panel per joint with the force ``F = (Fx, Fy[, Fz])`` that body A exerts
+    on body B at B's joint point and ``|F|``, in world components, and one
+    panel with the couples ``T`` of the joints that transmit one.  A failed
+    integration is flagged in the title.
 
     Parameters
     ----------
@@ -202,27 +277,44 @@ def plot_trajectory(traj: Trajectory, *, path: str | PathLike | None = None, sho
     units : mapping of str to str, optional
         Units by coordinate name, ``"t"`` (time) and ``"energy"``, as
         :func:`kronlag.workflows.model_units` finds them in a model file;
-        quantities without a unit are labelled without one.
+        quantities without a unit are labelled without one (reactions are in
+        ``N`` and ``N*m`` when the energy is in ``J``).
+    reactions : None, bool or sequence of str
+        The joints whose reactions are drawn: ``None`` (default) every joint of
+        the system, if it has any; ``True`` every joint (an error if there is
+        none); ``False`` none; a list of joint names, those.
 
     Returns
     -------
     matplotlib.figure.Figure
+
+    Raises
+    ------
+    ValueError
+        ``reactions`` names a joint the system does not have.
     """
     units = dict(units or {})
-    panels = _panels(traj)
-    rows = len(panels) // 2
+    panels = _panels(traj, reactions)
+    rows = -(-len(panels) // 2)
     figure = _new_figure(show=show, figsize=(_FIGURE_WIDTH, 0.6 + _PANEL_HEIGHT * rows), layout="constrained")
     grid = figure.subplots(rows, 2, sharex=True, squeeze=False)
     for axes, panel in zip(grid.flat, panels):
         panel(axes, traj, units)
-    return _finish(figure, grid, title=_title(traj), failed=traj.status != 0, units=units, path=path, show=show)
+    return _finish(figure, grid, used=len(panels), title=_title(traj), failed=traj.status != 0, units=units,
+                   path=path, show=show)
 
 
-def _finish(figure: Figure, grid: np.ndarray, *, title: str, failed: bool, units: Mapping[str, str],
+def _finish(figure: Figure, grid: np.ndarray, *, used: int, title: str, failed: bool, units: Mapping[str, str],
             path: str | PathLike | None, show: bool) -> Figure:
-    """Label the time axes and the figure (red if the run failed); save and show it as asked."""
-    for axes in grid[-1]:
-        axes.set_xlabel(_with_unit("time $t$", units.get("t")))
+    """Remove the grid's cells after the first ``used``, label the lowest time axis of each column
+    (with its tick labels) and the figure (red if the run failed); save and show it as asked."""
+    for axes in grid.flat[used:]:
+        axes.remove()
+    columns = grid.shape[1]
+    for column in range(min(columns, used)):
+        lowest = grid[(used - column + columns - 1) // columns - 1, column]  # panels fill the grid row by row
+        lowest.xaxis.set_tick_params(labelbottom=True)
+        lowest.set_xlabel(_with_unit("time $t$", units.get("t")))
     figure.suptitle(title, color="tab:red" if failed else "black")
     if path is not None:
         figure.savefig(path)
@@ -241,7 +333,8 @@ def _series_figure(run: Kinematics, series: list[tuple[str, str, np.ndarray, lis
         _plot_series(axes, run.t, values, labels, title=panel, ylabel=ylabel)
     if not run.success:
         title += f"\nFAILED {run.message}"
-    return _finish(figure, grid, title=title, failed=not run.success, units=units, path=path, show=show)
+    return _finish(figure, grid, used=len(series), title=title, failed=not run.success, units=units, path=path,
+                   show=show)
 
 
 def _kinematic_series(run: Kinematics, units: Mapping[str, str]) -> list[tuple[str, str, np.ndarray, list[str]]]:
@@ -271,15 +364,58 @@ def plot_kinematics(run: Kinematics, *, path: str | PathLike | None = None, show
                           show=show)
 
 
+def plot_joint_reactions(traj: Trajectory, joints: Sequence[str] | None = None, *, frame: str = "world",
+                         path: str | PathLike | None = None, show: bool = False,
+                         units: Mapping[str, str] | None = None) -> Figure:
+    """Plot the reactions of ``joints`` (default: every joint) over time, a row per joint: the force
+    ``F`` that body A exerts on body B at B's joint point and ``|F|`` on the left, the couple ``T``
+    on B on the right (:mod:`kronlag.reactions`), in world or B's body components (``frame``).
+
+    Options as for :func:`plot_trajectory`; returns the figure.
+
+    Raises
+    ------
+    ValueError
+        The system has no joints, or ``joints`` names one it does not have; ``frame`` is not
+        ``"world"`` or ``"body"``.
+    """
+    units = dict(units or {})
+    selected = _selected_joints(traj, True if joints is None else joints)
+    if not selected:
+        raise ValueError("joints: give at least one joint name (or None for every joint)")
+    figure = _new_figure(show=show, figsize=(_FIGURE_WIDTH, 0.6 + _PANEL_HEIGHT * len(selected)),
+                         layout="constrained")
+    grid = figure.subplots(len(selected), 2, sharex=True, squeeze=False)
+    for (forces, couples), joint in zip(grid, selected):
+        _reaction_force_panel(forces, traj, units, joint=joint, frame=frame)
+        _reaction_couple_panel(couples, traj, units, joints=[joint], frame=frame,
+                               title=f"{joint.name}: couple on {joint.body_b}")
+    title = f"{traj.model.equations.system.name}: joint reactions ({frame} components)"
+    return _finish(figure, grid, used=grid.size, title=title, failed=traj.status != 0, units=units, path=path,
+                   show=show)
+
+
+def _joint_force_magnitudes(columns: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``|F|`` by joint name from reaction columns ``<joint>.Fx, <joint>.Fy[, <joint>.Fz]``."""
+    components: dict[str, list[np.ndarray]] = {}
+    for label, values in columns.items():
+        joint, _, component = label.rpartition(".")
+        if component in ("Fx", "Fy", "Fz"):
+            components.setdefault(joint, []).append(values)
+    return {joint: np.linalg.norm(np.column_stack(values), axis=1) for joint, values in components.items()}
+
+
 def plot_inverse_dynamics(run: InverseDynamicsRun, *, path: str | PathLike | None = None, show: bool = False,
                           units: Mapping[str, str] | None = None) -> Figure:
     """Plot the result of :func:`kronlag.inverse_dynamics`.
 
     Panels: the coordinates ``q`` (and the named points), the actuator forces
-    ``u`` (on the actuated coordinates, or of the drives), and the multipliers
-    ``lambda`` / ``mu`` (if the model has constraints).  Force units are ``N*m``
-    on an angle and ``N`` on a length, when the energy is in ``J``.  Options as
-    for :func:`plot_trajectory`.
+    ``u`` (on the actuated coordinates, or of the drives), the multipliers
+    ``lambda`` / ``mu`` (if the model has constraints) and, if the model has
+    joints, the magnitude ``|F|`` of every joint's reaction force
+    (``run.reactions``, :mod:`kronlag.reactions`).  Force units are ``N*m`` on
+    an angle and ``N`` on a length, when the energy is in ``J``.  Options as for
+    :func:`plot_trajectory`.
     """
     units = dict(units or {})
     force_units = {"rad": "N*m", "m": "N"} if units.get("energy") == "J" else {}
@@ -291,5 +427,9 @@ def plot_inverse_dynamics(run: InverseDynamicsRun, *, path: str | PathLike | Non
         series.append(("Lagrange multipliers", r"$\lambda,\ \mu$", np.hstack([run.lam, run.mu]),
                        [_math_label(f"lambda{j + 1}") for j in range(run.lam.shape[1])]
                        + [_math_label(f"mu{k + 1}") for k in range(run.mu.shape[1])]))
+    joint_forces = _joint_force_magnitudes(run.reactions)
+    if joint_forces:
+        series.append(("Joint reaction forces", _with_unit("$|F|$", _reaction_unit("force", units)),
+                       np.column_stack(list(joint_forces.values())), list(joint_forces)))
     return _series_figure(run, series, f"inverse dynamics: forces on {', '.join(run.actuated)}, {len(run.t)} samples",
                           units=units, path=path, show=show)

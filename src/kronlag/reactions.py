@@ -122,35 +122,14 @@ def reaction_columns(model, t, q, lam) -> dict[str, np.ndarray]:
 
 
 def plot_reactions(trajectory, joints: Sequence[str] | None = None, *, frame: str = "world",
-                   path: str | PathLike | None = None):
+                   path: str | PathLike | None = None, **options):
     """Plot the reactions of ``joints`` (default: every joint) over time, one row per joint:
-    the force components ``F`` and ``|F|`` on the left, the couple ``T`` on the right.
+    the force components ``F`` and ``|F|`` on the left, the couple ``T`` on the right; see
+    :func:`kronlag.plotting.plot_joint_reactions` (``show``, ``units``).
 
     Returns the :class:`matplotlib.figure.Figure` (standalone, no GUI backend needed);
     with ``path`` it is also saved there.
     """
-    from matplotlib.figure import Figure
+    from .plotting import plot_joint_reactions
 
-    system = trajectory.model.equations.system
-    names = [joint.name for joint in system.joints] if joints is None else list(joints)
-    if not names:
-        raise ValueError(f"{system.name} has no joints to plot the reactions of")
-    figure = Figure(figsize=(12.0, 2.8 * len(names)), layout="constrained")
-    axes = figure.subplots(len(names), 2, squeeze=False, sharex=True)
-    for (forces, couples), name in zip(axes, names):
-        reaction = joint_reaction(trajectory.model, name, trajectory.t, trajectory.q, trajectory.lam, frame=frame)
-        for i, axis in enumerate("xyz"[:reaction.force.shape[1]]):
-            forces.plot(trajectory.t, reaction.force[:, i], label=f"$F_{axis}$")
-        forces.plot(trajectory.t, np.linalg.norm(reaction.force, axis=1), "k--", label="$|F|$")
-        for i, axis in enumerate("z" if reaction.torque.shape[1] == 1 else "xyz"):
-            couples.plot(trajectory.t, reaction.torque[:, i], label=f"$M_{axis}$")
-        forces.set_title(f"{name}: force on {_joint(system, name).body_b} ({frame} frame)")
-        couples.set_title(f"{name}: couple")
-        for panel in (forces, couples):
-            panel.legend(loc="upper right", fontsize="small")
-            panel.grid(True, alpha=0.3)
-    for panel in axes[-1]:
-        panel.set_xlabel("t")
-    if path is not None:
-        figure.savefig(path, dpi=100)
-    return figure
+    return plot_joint_reactions(trajectory, joints, frame=frame, path=path, **options)

@@ -234,6 +234,9 @@ class SimulationSummary:
         ``W`` at the last time: the work of applied forces, torques and dampers.
     wall_time : float
         Seconds.
+    largest_reactions : tuple of (str, float)
+        Every joint's name and its largest reaction force ``max |F|`` over the run
+        (:meth:`Trajectory.reaction`).
     """
 
     success: bool
@@ -248,18 +251,22 @@ class SimulationSummary:
     relative_energy_drift: float
     wall_time: float
     work: float = 0.0
+    largest_reactions: tuple[tuple[str, float], ...] = ()
 
     def report(self) -> str:
         """A few lines of text for people."""
         status = "ok" if self.success else f"FAILED: {self.message}"
-        return "\n".join([
+        lines = [
             f"status: {status}",
             f"method {self.method}: {self.steps} steps, {self.points} output points, t = 0 .. {self.t_final:g}",
             f"max constraint drift: position {self.position_drift:.3g}, velocity {self.velocity_drift:.3g}",
             f"energy drift: {self.energy_drift:.3g} (relative {self.relative_energy_drift:.3g}; "
             f"E(t) - E(0) - W(t) with the work of non-conservative forces W = {self.work:.6g})",
-            f"wall time: {self.wall_time:.3g} s",
-        ])
+        ]
+        if self.largest_reactions:
+            lines.append("max joint force |F|: " + ", ".join(f"{name} {force:.5g}"
+                                                             for name, force in self.largest_reactions))
+        return "\n".join([*lines, f"wall time: {self.wall_time:.3g} s"])
 
 
 def _largest(values: np.ndarray) -> float:
@@ -278,7 +285,9 @@ def summarize(trajectory: Trajectory) -> SimulationSummary:
         t_final=float(trajectory.t[-1]) if len(trajectory.t) else 0.0,
         position_drift=_largest(trajectory.position_residual), velocity_drift=_largest(trajectory.velocity_residual),
         energy_drift=drift, relative_energy_drift=drift / scale if scale else 0.0, wall_time=trajectory.wall_time,
-        work=float(work[-1]) if work.size else 0.0)
+        work=float(work[-1]) if work.size else 0.0,
+        largest_reactions=tuple((joint.name, _largest(np.linalg.norm(trajectory.reaction(joint.name).force, axis=1)))
+                                for joint in trajectory.model.equations.system.joints) if len(trajectory.t) else ())
 
 
 # -- inverse dynamics -----------------------------------------------------------------
