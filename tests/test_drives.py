@@ -265,3 +265,64 @@ q = {x = 0.0, y = -0.5}
     assert trajectory.success, trajectory.message
     np.testing.assert_allclose(trajectory.q[:, 0], 0.25 * np.sin(trajectory.t), atol=1e-8)
     np.testing.assert_allclose(trajectory.q[:, 1], -np.sqrt(0.25 - trajectory.q[:, 0] ** 2), atol=1e-8)
+
+
+def test_equilibrium_and_linearization_refuse_moving_drives(crank_driven):
+    from kronlag.analysis import EquilibriumError, equilibrium, linearize
+
+    model, _ = crank_driven
+    with pytest.raises(EquilibriumError, match="drives move there"):
+        equilibrium(model, [0.0, 0.0, 0.45])
+    with pytest.raises(ValueError, match="time-dependent constraints"):
+        linearize(model, [0.0, 0.0, 0.45])
+
+
+FIVE_BAR_CIRCLE = """
+[[drives]]
+name = "end effector x"
+target = "end_effector_x"
+motion = "0.05*cos(2*pi*t)"
+
+[[drives]]
+name = "end effector y"
+target = "end_effector_y"
+motion = "0.35 + 0.05*sin(2*pi*t)"
+"""
+
+
+def five_bar_circle_file(tmp_path):
+    from kronlag.modelfile import example_path
+
+    text = example_path("five_bar").read_text()
+    text = text[:text.index("[[drives]]")] + FIVE_BAR_CIRCLE
+    path = tmp_path / "five_bar_circle.toml"
+    path.write_text(text)
+    return path
+
+
+def test_five_bar_driven_at_its_end_effector_reports_the_motor_torques(tmp_path, capsys):
+    """The motor power tau1 theta1d + tau2 theta2d equals the rate of the total energy
+    (no other force does work), along the circle that the end-effector drives prescribe."""
+    from kronlag.cli import main
+    from kronlag.workflows import inverse_dynamics_along
+
+    path = five_bar_circle_file(tmp_path)
+    robot = kronlag.load_model(path)
+    times = np.linspace(0, 1, 401)
+    run = inverse_dynamics_along(robot, robot.drives, times, actuated=["theta1", "theta2"])
+    assert run.success, run.message
+    assert run.actuated == ("theta1", "theta2")
+    free = kronlag.derive(robot.system).numeric(robot.numeric_values())
+    energy = np.array([free.kinetic_energy(q, qd) + free.potential_energy(q) for q, qd in zip(run.q, run.qd)])
+    power = np.sum(run.forces * run.qd[:, :2], axis=1)
+    rate = np.gradient(energy, times, edge_order=2)
+    np.testing.assert_allclose(power[2:-2], rate[2:-2], atol=1e-4 * np.max(np.abs(power)))
+    position = run.points["end_effector"]["position"]
+    np.testing.assert_allclose(position, np.column_stack([0.05 * np.cos(2 * np.pi * times),
+                                                          0.35 + 0.05 * np.sin(2 * np.pi * times)]), atol=1e-12)
+    # and from the command line, with the actuators named
+    target = tmp_path / "torques.csv"
+    assert main(["inverse", str(path), "--t-end", "1", "--points", "11", "--actuated", "theta1,theta2",
+                 "--output", str(target)]) == 0
+    table = np.genfromtxt(target, delimiter=",", names=True)
+    np.testing.assert_allclose(table["force_theta1"], run.forces[::40, 0], rtol=1e-9)

@@ -201,10 +201,16 @@ def equilibrium(model: NumericModel, q_guess, *, fixed: Mapping | None = None, t
     Raises
     ------
     EquilibriumError
-        No equilibrium near the guess (the message and ``residual`` say how far).
+        No equilibrium near the guess (the message and ``residual`` say how far), or the
+        drives move at ``t`` (``Phi_t != 0``).
     """
     functions = _tangent(model)
     m, r = model.m, model.r
+    moving = np.max(np.abs(model.Phi_t(model._vector(q_guess, "q_guess"), t)), initial=0.0)
+    if moving > 0:
+        raise EquilibriumError(f"no static equilibrium of {model.equations.system.name} at t = {t:g}: its drives "
+                               f"move there (max |Phi_t| = {moving:.3g}); hold coordinates with fixed=... instead",
+                               moving)
     try:
         q, _ = model.assemble(q_guess, fixed=fixed, t=t)
     except AssemblyError as error:
@@ -424,7 +430,7 @@ def linearize(model: NumericModel, q, qd=None, *, t: float = 0.0, independent: S
     Parameters
     ----------
     model : NumericModel
-        With holonomic constraints only (s = 0).
+        With holonomic, time-independent constraints only (s = 0, no drives).
     q : (m,)
         Must satisfy ``Phi(q) = 0`` (assemble it first).
     qd : (m,), optional
@@ -445,6 +451,10 @@ def linearize(model: NumericModel, q, qd=None, *, t: float = 0.0, independent: S
     -------
     LinearModel
     """
+    if model.equations.rheonomic:
+        raise ValueError(f"linearize: {model.equations.system.name} has time-dependent constraints (drives), so its "
+                         "motion about a point is not that of a fixed linear system; linearize the model without "
+                         "the drives, with the driven coordinates among the inputs")
     functions = _tangent(model)
     m, r = model.m, model.r
     q = model._vector(q, "q")

@@ -65,8 +65,8 @@ Format (every table but ``coordinates`` is optional)::
     atol = 1e-10
 
     [[drives]]                                  # prescribed motion for kinematics and inverse dynamics
-    coordinate = "q1"
-    motion = "1 + 2*pi*t"
+    coordinate = "q1"                           # or target = "<expression of q>", e.g. "P_x" of a point P
+    motion = "1 + 2*pi*t"                       # optional name (default "drive <target>")
 
     [[drawing]]                                 # name, points (list of points)
     [[traces]]                                  # name, point
@@ -108,6 +108,7 @@ from .system import (
 __all__ = [
     "ModelFileError",
     "ModelFile",
+    "PrescribedMotion",
     "SimulationSettings",
     "load_model",
     "loads_model",
@@ -138,6 +139,15 @@ class SimulationSettings:
     atol: float = 1e-10
 
 
+@dataclass(frozen=True)
+class PrescribedMotion:
+    """A drive of a model file: ``target(q) = motion(t)`` (a coordinate or an expression of the
+    coordinates; an expression of ``t`` and the parameters)."""
+
+    target: sp.Expr
+    motion: sp.Expr
+
+
 @dataclass
 class ModelFile:
     """A system together with the numbers needed to run it.
@@ -158,9 +168,10 @@ class ModelFile:
     fixed, qd_fixed : tuple of str
         Coordinates whose position / speed assembly keeps at the guess.
     simulation : SimulationSettings
-    drives : dict of str to sympy.Expr
-        Prescribed motions ``q_i(t)`` (expressions of ``t`` and parameters)
-        for inverse dynamics.
+    drives : dict of str to PrescribedMotion
+        Prescribed motions by drive name (``target(q) = motion(t)``) for
+        kinematic analysis and inverse dynamics; they become drives
+        (:meth:`kronlag.System.add_drive`) in :func:`kronlag.workflows.driven_model`.
     source : str or None
         The file the model was read from.
     """
@@ -174,7 +185,7 @@ class ModelFile:
     qd_guess: dict[str, sp.Expr] = field(default_factory=dict)
     qd_fixed: tuple[str, ...] = ()
     simulation: SimulationSettings = field(default_factory=SimulationSettings)
-    drives: dict[str, sp.Expr] = field(default_factory=dict)
+    drives: dict[str, PrescribedMotion] = field(default_factory=dict)
     source: str | None = None
 
     def numeric_values(self) -> dict[str, float]:
@@ -653,14 +664,27 @@ def _read_settings(reader: _Reader, document: dict, model: ModelFile) -> None:
         atol=reader.number(settings.get("atol", defaults.atol), "simulation.atol", positive=True))
 
     drive_symbols = {**parameter_symbols, "t": t}
-    for entry, table in reader.tables(document, "drives", required=("coordinate", "motion")):
-        coordinate = reader.string(table["coordinate"], f"{entry}.coordinate")
-        if coordinate not in names:
-            raise reader.error(f"{entry}.coordinate", f"unknown coordinate {coordinate!r}; "
-                                                      f"coordinates are {', '.join(names)}")
-        if coordinate in model.drives:
-            raise reader.error(f"{entry}.coordinate", f"coordinate {coordinate!r} is driven twice")
-        model.drives[coordinate] = reader.expression(table["motion"], f"{entry}.motion", drive_symbols)
+    for entry, table in reader.tables(document, "drives", required=("motion",),
+                                      optional=("coordinate", "target", "name")):
+        if ("coordinate" in table) == ("target" in table):
+            raise reader.error(entry, "give either coordinate (a coordinate name) or target (an expression of "
+                                      "the coordinates, e.g. a point's end_effector_x), not both or neither")
+        if "coordinate" in table:
+            coordinate = reader.string(table["coordinate"], f"{entry}.coordinate")
+            if coordinate not in names:
+                raise reader.error(f"{entry}.coordinate", f"unknown coordinate {coordinate!r}; "
+                                                          f"coordinates are {', '.join(names)}")
+            target = reader.symbols[coordinate]
+        else:
+            target = reader.expression(table["target"], f"{entry}.target")
+            if not target.free_symbols & set(model.system.coordinates) or t in target.free_symbols:
+                raise reader.error(f"{entry}.target", "must be an expression of the coordinates (not of t: "
+                                                      "the motion gives the time dependence)")
+        name = (reader.string(table["name"], f"{entry}.name") if "name" in table else f"drive {target}")
+        if name in model.drives:
+            raise reader.error(entry, f"the drive {name!r} is given twice")
+        model.drives[name] = PrescribedMotion(target, reader.expression(table["motion"], f"{entry}.motion",
+                                                                        drive_symbols))
 
 
 def loads_model(text: str, *, source: str = "<string>") -> ModelFile:
@@ -832,8 +856,11 @@ def _document(model: ModelFile) -> dict[str, Any]:
     settings = model.simulation
     document["simulation"] = {"t_end": settings.t_end, "method": settings.method,
                               "rtol": settings.rtol, "atol": settings.atol}
-    document["drives"] = [{"coordinate": name, "motion": writer.expression(motion)}
-                          for name, motion in model.drives.items()]
+    document["drives"] = [
+        {"name": name, **({"coordinate": drive.target.name} if drive.target in system.coordinates
+                          else {"target": writer.expression(drive.target)}),
+         "motion": writer.expression(drive.motion)}
+        for name, drive in model.drives.items()]
     document["drawing"] = [{"name": line.name, "points": [writer.vector(p) for p in line.points]}
                            for line in system.drawing]
     document["traces"] = [{"name": trace.name, "point": writer.vector(trace.points[0])} for trace in system.traces]

@@ -22,7 +22,7 @@ from .derivation import derive
 from .drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
 from .equations import Equations
 from .expressions import parse_expression
-from .modelfile import ModelFile
+from .modelfile import ModelFile, PrescribedMotion
 from .system import ModelError, t
 
 if TYPE_CHECKING:
@@ -293,36 +293,43 @@ def summarize(trajectory: Trajectory) -> SimulationSummary:
 # -- inverse dynamics -----------------------------------------------------------------
 
 
-def parse_drive(text: str, model: ModelFile) -> tuple[str, sp.Expr]:
-    """Read ``"q1=<expression of t>"`` (as on the command line) into ``(coordinate, motion)``."""
+def parse_drive(text: str, model: ModelFile) -> tuple[str, PrescribedMotion]:
+    """Read ``"q1=<expression of t>"`` (as on the command line) into ``(drive name, motion)``."""
     name, separator, expression = text.partition("=")
     name = name.strip()
-    coordinates = [q.name for q in model.system.coordinates]
+    coordinates = {q.name: q for q in model.system.coordinates}
     if not separator or name not in coordinates:
         raise ModelError(f"drive {text!r}: expected COORDINATE=EXPRESSION with a coordinate of "
                          f"{', '.join(coordinates)}")
     symbols = {p.name: p for p in model.system.parameters} | {"t": t}
-    return name, parse_expression(expression, symbols, what=f"drive {name}")
+    motion = parse_expression(expression, symbols, what=f"drive {name}")
+    return f"drive {name}", PrescribedMotion(coordinates[name], motion)
 
 
-def driven_model(model: ModelFile, drives: Mapping[str, sp.Expr]) -> NumericModel:
-    """The numeric model of ``model`` with ``drives`` (coordinate name -> motion, an expression of
-    ``t`` and the parameters) added as rheonomic constraints (:meth:`kronlag.System.add_drive`)."""
+def driven_model(model: ModelFile, drives: Mapping[str, PrescribedMotion]) -> NumericModel:
+    """The numeric model of ``model`` with ``drives`` (by name) added as rheonomic constraints
+    (:meth:`kronlag.System.add_drive`)."""
     system = copy.deepcopy(model.system)
-    for coordinate, motion in drives.items():
-        system.add_drive(coordinate, motion)
+    for name, drive in drives.items():
+        system.add_drive(drive.target, drive.motion, name=name)
     return derive(system).numeric(model.numeric_values())
 
 
-def kinematics_along(model: ModelFile, drives: Mapping[str, sp.Expr], times: Sequence[float] | np.ndarray) -> Kinematics:
+def kinematics_along(model: ModelFile, drives: Mapping[str, PrescribedMotion],
+                     times: Sequence[float] | np.ndarray) -> Kinematics:
     """:func:`kronlag.kinematic_analysis` of ``model`` driven by ``drives`` (one per degree of
     freedom), from the file's assembly guesses."""
     return kinematic_analysis(driven_model(model, drives), times, model.guess_vectors()[0])
 
 
-def inverse_dynamics_along(model: ModelFile, drives: Mapping[str, sp.Expr], times: Sequence[float] | np.ndarray,
-                           *, actuated: Sequence[str] | None = None) -> InverseDynamicsRun:
+def inverse_dynamics_along(model: ModelFile, drives: Mapping[str, PrescribedMotion],
+                           times: Sequence[float] | np.ndarray, *,
+                           actuated: Sequence[str] | None = None) -> InverseDynamicsRun:
     """:func:`kronlag.inverse_dynamics` of ``model`` driven by ``drives``, with the actuators on the
-    coordinates ``actuated`` (default: the driven coordinates themselves)."""
+    coordinates ``actuated``; by default on the driven coordinates when every drive drives a
+    coordinate, else the drives' own forces."""
+    coordinates = model.system.coordinates
+    if actuated is None and all(drive.target in coordinates for drive in drives.values()):
+        actuated = [drive.target.name for drive in drives.values()]
     return inverse_dynamics(driven_model(model, drives), times, model.guess_vectors()[0],
-                            actuated=tuple(drives) if actuated is None else tuple(actuated))
+                            actuated=None if actuated is None else tuple(actuated))
