@@ -326,3 +326,21 @@ def test_five_bar_driven_at_its_end_effector_reports_the_motor_torques(tmp_path,
                  "--output", str(target)]) == 0
     table = np.genfromtxt(target, delimiter=",", names=True)
     np.testing.assert_allclose(table["force_theta1"], run.forces[::40, 0], rtol=1e-9)
+
+
+def test_a_time_dependent_velocity_constraint():
+    """A point mass on a line whose speed is prescribed, xd = cos t (b = -cos t): x = x0 + sin t,
+    and the constraint force is m xdd = -m sin t."""
+    x, y = kronlag.coordinates("x y")
+    m = sp.Symbol("m")
+    system = kronlag.System([x, y], parameters=[m])
+    system.add_body(kronlag.PointMass("bob", mass=m, position=(x, y)))
+    system.add_nonholonomic_constraint(kronlag.speed_symbol(x) - sp.cos(T), name="conveyor")
+    model = kronlag.derive(system).numeric({"m": 2.0})
+    times = np.linspace(0, 2, 201)  # the work is integrated between outputs: fine enough for 1e-7
+    trajectory = kronlag.simulate(model, (0, 2), [0.5, 0.0], [1.0, 0.3], t_eval=times, method="projection")
+    assert trajectory.success, trajectory.message
+    np.testing.assert_allclose(trajectory.q[:, 0], 0.5 + np.sin(times), atol=1e-8)
+    np.testing.assert_allclose(trajectory.q[:, 1], 0.3 * times, atol=1e-8)
+    np.testing.assert_allclose(-trajectory.mu[:, 0], -2.0 * np.sin(times), atol=1e-7)
+    np.testing.assert_allclose(trajectory.energy_balance, 0, atol=1e-7)

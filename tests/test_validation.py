@@ -81,12 +81,11 @@ INVALID = {
          r"constraint 'fixed' does not depend on any coordinate"),
     "holonomic constraint containing speeds":
         (lambda: planar_system().add_constraint(q1 - q1d, name="rolling"), r"constraint 'rolling' contains speeds"),
-    "time in a holonomic constraint":
-        (lambda: planar_system().add_constraint(q1 - kronlag.t, name="driven"),
-         r"constraint 'driven' may not depend on time .*: t"),
-    "time in a nonholonomic constraint":
-        (lambda: planar_system().add_nonholonomic_constraint(q1d - kronlag.t, name="driven"),
-         r"nonholonomic constraint 'driven' may not depend on time"),
+    "drive motion depending on the coordinates":
+        (lambda: planar_system().add_drive("q1", q2 * kronlag.t, name="driven"),
+         r"drive 'driven' motion may not depend on the coordinates: q2"),
+    "drive of an unknown coordinate":
+        (lambda: planar_system().add_drive("q9", kronlag.t), r"drive of 'q9': no such coordinate"),
     "nonholonomic constraint not linear in qd":
         (lambda: planar_system().add_nonholonomic_constraint(q1d * q2d + q1d, name="knife"),
          r"nonholonomic constraint 'knife' is not linear in the speeds: its coefficient of q1d is q2d \+ 1"),
