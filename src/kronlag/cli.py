@@ -406,7 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_argument("--simplify", action="store_true", help="apply trigsimp to every entry")
     sub.add_argument("--output", metavar="FILE", help="write to FILE instead of standard output")
 
-    sub = command("export", _export, "write standalone code for M, C, g, Phi, Phi_q, gamma, A, b, f_Q")
+    sub = command("export", _export, "write standalone code for M, C, g, Phi, Phi_q, Phi_t, gamma, A, b, f_Q")
     sub.add_argument("--lang", choices=LANGUAGES, required=True, help="target language")
     sub.add_argument("--simplify", action="store_true", help="apply trigsimp to every entry first")
     sub.add_argument("--output", metavar="FILE", help="write to FILE instead of standard output")

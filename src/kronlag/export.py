@@ -38,8 +38,8 @@ from .equations import MATRIX_NAMES, Equations
 __all__ = ["LANGUAGES", "FORMATS", "export_code", "exported_matrices", "format_equations", "file_stem"]
 
 #: Functions every export defines, in order.
-EXPORTED = ("M", "C", "g", "Phi", "Phi_q", "gamma", "A", "b", "f_Q")
-_VECTORS = frozenset({"g", "Phi", "gamma", "b", "f_Q"})
+EXPORTED = ("M", "C", "g", "Phi", "Phi_q", "Phi_t", "gamma", "A", "b", "f_Q")
+_VECTORS = frozenset({"g", "Phi", "Phi_t", "gamma", "b", "f_Q"})
 _TEMPORARY = "w"
 
 
@@ -144,7 +144,8 @@ LANGUAGES = tuple(_LANGUAGE_TABLE)
 
 
 def exported_matrices(eom: Equations) -> dict[str, sp.ImmutableMatrix]:
-    """The matrices :func:`export_code` writes, by function name; ``gamma = -(d Phi_q/dt) qd``."""
+    """The matrices :func:`export_code` writes, by function name; ``Phi_t = dPhi/dt`` (drives),
+    ``gamma = -(dPhi_q/dt) qd - 2 Phi_qt qd - Phi_tt``."""
     return {name: getattr(eom, name) for name in EXPORTED}
 
 
@@ -287,7 +288,7 @@ def _header(eom: Equations, language: _Language, prefix: str, order: list[sp.Sym
     if fixed:
         lines.append("Built-in parameter values: " + ", ".join(f"{_comment_text(k.name)} = {v}"
                                                                for k, v in fixed.items()))
-    shapes = {"M": (m, m), "C": (m, m), "g": (m,), "Phi": (r,), "Phi_q": (r, m), "gamma": (r,),
+    shapes = {"M": (m, m), "C": (m, m), "g": (m,), "Phi": (r,), "Phi_q": (r, m), "Phi_t": (r,), "gamma": (r,),
               "A": (s, m), "b": (s,), "f_Q": (m,)}
     lines.append("Functions: " + ", ".join(f"{prefix}_{name} {shapes[name]}" for name in EXPORTED))
     if language.note:

@@ -48,7 +48,7 @@ if TYPE_CHECKING:
 __all__ = ["casadi_functions", "jax_functions", "MATRICES"]
 
 #: The matrices exported, with whether each is a vector.
-MATRICES = {"M": False, "C": False, "Cqd": True, "g": True, "f_Q": True, "Phi": True, "Phi_q": False,
+MATRICES = {"M": False, "C": False, "Cqd": True, "g": True, "f_Q": True, "Phi": True, "Phi_q": False, "Phi_t": True,
             "A": False, "b": True, "gamma": True, "gamma_nh": True}
 
 _FUNCTION_NAMES = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "exp", "log",
