@@ -1,6 +1,17 @@
 /* kronlag: dense linear algebra shared by the solvers and the integrators (generated code only
  * includes this file; no allocation, variable-length arrays of the model's dimensions). */
 
+/* With KRONLAG_WIDE_LOOPS (kronlag's own build of the solver part, at -O3), the O(m^2) and O(m^3)
+ * loops of the augmented solve are compiled twice with GCC on x86-64 glibc, for the baseline and
+ * for AVX2, and the loader picks the one the CPU runs (an ifunc): the library stays portable (a
+ * cached one too) and runs four doubles per instruction where it can. */
+#if defined(KRONLAG_WIDE_LOOPS) && defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) \
+    && defined(__GLIBC__)
+#define KRONLAG_WIDE __attribute__((target_clones("avx2", "default"), noinline))
+#else
+#define KRONLAG_WIDE
+#endif
+
 /* Householder QR of the rows x cols matrix a (row-major, leading dimension lda), in place:
  * R in the upper triangle, reflector j (v_j[j] = 1) below the diagonal of column j, tau[j].
  * With perm != NULL, column pivoting by the largest remaining norm (a P = Q R). */
@@ -56,7 +67,7 @@ static void house_apply(const double *a, int rows, int lda, int j, double tau, d
  * of a (m x ., leading dimension lda): H B H = B - v w^T - w v^T with u = B v,
  * w = tau u - (tau^2 v^T u / 2) v.  Every loop runs along rows (vectorizable), unlike m calls
  * of house_apply on the columns of B. */
-static void house_reflect_symmetric(const double *a, int m, int lda, int j, double tau, double *B)
+KRONLAG_WIDE static void house_reflect_symmetric(const double *a, int m, int lda, int j, double tau, double *B)
 {
     if (tau == 0.0) return;
     double v[m], u[m];
@@ -78,7 +89,7 @@ static void house_reflect_symmetric(const double *a, int m, int lda, int j, doub
  * leading dimension lda), U written over the upper triangle, right-looking (row updates,
  * vectorizable).  Returns 1, a singular configuration, when a pivot is not above
  * KRONLAG_CHOLESKY_RTOL times the largest diagonal entry of A, else 0. */
-static int cholesky_upper(double *A, int n, int lda)
+KRONLAG_WIDE static int cholesky_upper(double *A, int n, int lda)
 {
     double largest = 0.0;
     for (int i = 0; i < n; ++i) if (A[i * lda + i] > largest) largest = A[i * lda + i];
@@ -98,7 +109,7 @@ static int cholesky_upper(double *A, int n, int lda)
 }
 
 /* x <- (U^T U)^-1 x with the factor of cholesky_upper. */
-static void cholesky_solve(const double *U, int n, int lda, double *x)
+KRONLAG_WIDE static void cholesky_solve(const double *U, int n, int lda, double *x)
 {
     for (int i = 0; i < n; ++i) {                     /* U^T y = x, by columns of U^T */
         x[i] /= U[i * lda + i];
