@@ -250,6 +250,16 @@ def test_bench_forward_dynamics_smoke():
     assert "pinocchio constraintDynamics" in process.stdout
 
 
+@pytest.mark.slow
+@needs_compiler
+def test_bench_arms_smoke():
+    pytest.importorskip("pinocchio")
+    process = subprocess.run([sys.executable, str(BENCH / "bench_arms.py"), "--arms", "ur5", "--quick"],
+                             capture_output=True, text=True, timeout=1800)
+    assert process.returncode == 0, process.stdout + process.stderr
+    assert "pinocchio aba" in process.stdout and "ur5" in process.stdout
+
+
 @needs_compiler
 def test_bench_accessors_smoke():
     pytest.importorskip("pinocchio")
