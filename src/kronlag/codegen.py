@@ -318,12 +318,8 @@ class KernelSource:
 
     def _compute(self, name: str) -> list[list[se.Basic]]:
         eq = self.equations
-        if name in ("M", "C", "Cqd", "C_christoffel", "g", "Phi", "Phi_q", "A", "b", "f_Q"):
+        if name in ("M", "C", "Cqd", "C_christoffel", "g", "Phi", "Phi_q", "A", "b", "f_Q", "gamma", "gamma_nh"):
             return self.convert.matrix(getattr(eq, name), name)
-        if name == "gamma":
-            return self._acceleration_offset(self.matrix("Phi_q"), [[0]] * len(self.matrix("Phi")))
-        if name == "gamma_nh":
-            return self._acceleration_offset(self.matrix("A"), self.matrix("b"))
         if name == "potential_energy":
             return [[self.convert.entry(sp.sympify(eq.potential_energy), "potential energy")]]
         if name == "h":
@@ -333,15 +329,6 @@ class KernelSource:
             variables = self.q if name == "K" else self.qd
             return [[se.diff(entry, variable) for variable in variables] for entry in self._dynamic_residual()]
         raise KeyError(name)
-
-    def _acceleration_offset(self, jacobian: list[list[se.Basic]], offset: list[list[se.Basic]]) -> list[list[se.Basic]]:
-        """``-d/dt (jacobian qd + offset)`` at fixed ``qd`` by Theorem 1, as ``Equations.gamma`` and
-        ``Equations.gamma_nh`` define it, differentiated with SymEngine (SymPy's ``diff`` of the
-        whole velocity takes 25 s for ``closed_chain(30, "relative")``)."""
-        velocities = [se.Add(*(entry * speed for entry, speed in zip(row, self.qd)), bias[0])
-                      for row, bias in zip(jacobian, offset)]
-        return [[-se.Add(*(se.diff(velocity, coordinate) * speed for coordinate, speed in zip(self.q, self.qd)))]
-                for velocity in velocities]
 
     def _dynamic_residual(self) -> list[se.Basic]:
         """``e = M a + C qd + g - f_Q + Phi_q^T nu + A^T mu`` with the accelerations ``a`` and the
