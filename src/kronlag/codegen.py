@@ -13,7 +13,8 @@ The two backends only print the result:
   source, compiled with :func:`compile`) run on floats with :mod:`math` for one
   state, on NumPy arrays for a batch of states; no compiler needed;
 * ``"c"`` (:class:`CLibrary`): C compiled with the machine's C compiler
-  (``-O2``) into a shared library, cached on disk under ``$KRONLAG_CACHE`` or
+  (the solver at ``-O3``, the kernels at ``-O2``, long ones at ``-O1``; see
+  :func:`compile_shared_library`) into a shared library, cached on disk under ``$KRONLAG_CACHE`` or
   ``~/.cache/kronlag`` (a private directory; keyed by a hash of the source and
   the flags, content hash checked before loading), loaded with :mod:`ctypes`
   and called through the fixed call layer ``kronlag._call`` built at install
