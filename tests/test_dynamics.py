@@ -260,8 +260,49 @@ def dense_augmented_solution(model: kronlag.NumericModel, q, qd, t, alpha, beta)
     return solution[:model.m], solution[model.m:]
 
 
-AUGMENTED_CASES = ["closed_chain_12_relative", "closed_chain_12_absolute", "closed_chain_30_absolute",
-                   "four_bar_redundant", "double_parallelogram", "chaplygin_sleigh", "heavy_top"]
+def closed_chain_states(n: int, angles: str, backend: str) -> tuple[kronlag.NumericModel, list]:
+    """``closed_chain(n, angles)`` at three assembled states with random consistent speeds."""
+    model, q_near = closed_chain_model(n, angles, backend)
+    states = []
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        q, _ = model.assemble(q_near + rng.uniform(-0.05, 0.05, model.m))
+        qd, Phi_q = rng.uniform(-1, 1, model.m), model.Phi_q(q)
+        states.append((q, qd - np.linalg.pinv(Phi_q) @ (Phi_q @ qd), 0.3 * seed))
+    return model, states
+
+
+def redundant_four_bar_states(backend: str) -> tuple[kronlag.NumericModel, list]:
+    model = four_bar(backend, redundant=True)
+    return model, [(*four_bar_state(model), 0.0)]
+
+
+def double_parallelogram_states(backend: str) -> tuple[kronlag.NumericModel, list]:
+    values = dict(l=0.7, d=1.3, m=1.2, m_c=2.5, J=0.09, J_c=0.6, g=9.81)
+    model = kronlag.derive(double_parallelogram()).numeric(values, backend=backend)
+    states = []
+    for theta, omega in ((0.8, 1.7), (-0.4, 0.6)):
+        q, qd = model.assemble([theta, 0.0, theta, theta], fixed={"q1": theta},
+                               qd_guess=[omega, 0, omega, omega], qd_fixed={"q1": omega})
+        states.append((q, qd, 0.0))
+    return model, states
+
+
+def random_consistent_states(name: str, backend: str) -> tuple[kronlag.NumericModel, list]:
+    model = numeric(name, backend)
+    return model, [consistent_state(model, seed) for seed in range(3)]
+
+
+#: Models and states for the comparison with a dense solve, by case.
+AUGMENTED_CASES = {
+    "closed_chain_12_relative": functools.partial(closed_chain_states, 12, "relative"),
+    "closed_chain_12_absolute": functools.partial(closed_chain_states, 12, "absolute"),
+    "closed_chain_30_absolute": functools.partial(closed_chain_states, 30, "absolute"),
+    "four_bar_redundant": redundant_four_bar_states,
+    "double_parallelogram": double_parallelogram_states,
+    "chaplygin_sleigh": functools.partial(random_consistent_states, "chaplygin_sleigh"),
+    "heavy_top": functools.partial(random_consistent_states, "heavy_top"),
+}
 
 
 @pytest.mark.parametrize("backend", backend_params())
@@ -270,30 +311,7 @@ def test_forward_dynamics_matches_a_dense_solve_of_the_augmented_system(case, ba
     """The structured solver (null-space QR + Cholesky in C) against NumPy's dense least squares on the
     full augmented matrix, at random consistent states, with and without Baumgarte terms; redundant
     constraints included (four-bar with a third loop equation, the double parallelogram)."""
-    if case.startswith("closed_chain"):
-        _, n, angles = case.rsplit("_", 2)
-        model, q_near = closed_chain_model(int(n), angles, backend)
-        guesses = [q_near + np.random.default_rng(seed).uniform(-0.05, 0.05, model.m) for seed in range(3)]
-        states = []
-        for seed, guess in enumerate(guesses):
-            q, _ = model.assemble(guess)
-            qd = np.random.default_rng(seed).uniform(-1, 1, model.m)
-            Phi_q = model.Phi_q(q)
-            states.append((q, qd - np.linalg.pinv(Phi_q) @ (Phi_q @ qd), 0.3 * seed))
-    elif case == "four_bar_redundant":
-        model = four_bar(backend, redundant=True)
-        states = [(*four_bar_state(model), 0.0)]
-    elif case == "double_parallelogram":
-        values = dict(l=0.7, d=1.3, m=1.2, m_c=2.5, J=0.09, J_c=0.6, g=9.81)
-        model = kronlag.derive(double_parallelogram()).numeric(values, backend=backend)
-        states = []
-        for theta, omega in ((0.8, 1.7), (-0.4, 0.6)):
-            q, qd = model.assemble([theta, 0.0, theta, theta], fixed={"q1": theta},
-                                   qd_guess=[omega, 0, omega, omega], qd_fixed={"q1": omega})
-            states.append((q, qd, 0.0))
-    else:
-        model = numeric(case, backend)
-        states = [consistent_state(model, seed) for seed in range(3)]
+    model, states = AUGMENTED_CASES[case](backend)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", kronlag.RedundantConstraintsWarning)
         for q, qd, t in states:
@@ -302,4 +320,5 @@ def test_forward_dynamics_matches_a_dense_solve_of_the_augmented_system(case, ba
                 qdd, nu = dense_augmented_solution(model, q, qd, t, alpha, beta)
                 np.testing.assert_allclose(result.qdd, qdd, rtol=1e-8, atol=1e-8 * np.max(np.abs(qdd)))
                 multipliers = np.concatenate([result.lam, result.mu])
-                np.testing.assert_allclose(multipliers, nu, rtol=1e-7, atol=1e-8 * max(1.0, np.max(np.abs(nu), initial=0.0)))
+                scale = max(1.0, np.max(np.abs(nu), initial=0.0))
+                np.testing.assert_allclose(multipliers, nu, rtol=1e-7, atol=1e-8 * scale)

@@ -114,8 +114,8 @@ def test_velocity_terms_of_unusual_expressions_equal_C_qd():
     q1, q2, q3 = kronlag.coordinates("q1 q2 q3")
     m, inertia = sp.symbols("m J")
     system = kronlag.System([q1, q2, q3], parameters=[m, inertia], name="unusual")
-    system.add_body(kronlag.PointMass("a", mass=m, position=(sp.atan2(q1, 2 + q2 ** 2), sp.sqrt(1 + q1 ** 2 * q3 ** 2),
-                                                            sp.exp(q2) ** q1)))
+    system.add_body(kronlag.PointMass("a", mass=m, position=(
+        sp.atan2(q1, 2 + q2 ** 2), sp.sqrt(1 + q1 ** 2 * q3 ** 2), sp.exp(q2) ** q1)))
     system.add_body(kronlag.RigidBody("c", mass=m, inertia=sp.diag(inertia, 2 * inertia, 2 * inertia),
                                       position=(q1 * sp.cos(q2), sp.sin(q1 * q3), sp.tanh(q2 * q3)),
                                       rotation=kronlag.frames.euler_sequence("zyx", (q1, q2, q3))))

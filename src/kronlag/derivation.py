@@ -190,8 +190,8 @@ class _AlongSpeeds:
         if isinstance(expr, se.Pow) and self(expr.args[1]) == (zero, zero):
             base, exponent = expr.args
             base_first, base_second = self(base)
-            slope = exponent * base ** (exponent - 1)
-            return slope * base_first, exponent * (exponent - 1) * base ** (exponent - 2) * base_first ** 2 + slope * base_second
+            slope, curvature = exponent * base ** (exponent - 1), exponent * (exponent - 1) * base ** (exponent - 2)
+            return slope * base_first, curvature * base_first ** 2 + slope * base_second
         if isinstance(expr, se.Function) and len(expr.args) == 1:
             (argument,) = expr.args
             argument_first, argument_second = self(argument)
