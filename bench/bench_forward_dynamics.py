@@ -3,16 +3,20 @@
 
 Run by hand (not a pytest test; needs ``pip install pin``)::
 
-    python3 bench/bench_forward_dynamics.py            # n = 4 and 12
-    python3 bench/bench_forward_dynamics.py --n 4 8 12 20
+    python3 bench/bench_forward_dynamics.py            # n = 4, 12, 20, 30, 40, both conventions
+    python3 bench/bench_forward_dynamics.py --n 4 8 --angles relative
     python3 bench/bench_forward_dynamics.py --n 3 --quick   # smoke test
 
-The mechanism is ``kronlag.models.closed_chain(n, "relative")``: ``n`` uniform
+The mechanism is ``kronlag.models.closed_chain(n, angles)``: ``n`` uniform
 links in the x-y plane (lengths ``l_i``, masses ``m_i``, central inertias
 ``I_i``), link 1 pinned at the origin, the tip of link ``n`` pinned at the
-ground point ``(xg, yg)``, gravity ``g`` along -y; ``q_i`` are the joint angles
-relative to the previous link, which is what a Pinocchio chain of revolute
-joints uses (``q`` maps one to one).  In Pinocchio: ``n`` ``JointModelRZ``
+ground point ``(xg, yg)``, gravity ``g`` along -y.  With ``angles="relative"``
+``q_i`` are the joint angles relative to the previous link, which is what a
+Pinocchio chain of revolute joints uses (``q`` maps one to one); with
+``angles="absolute"`` they are the links' angles to the x axis,
+``q_abs = T q_rel`` with ``T`` the lower triangle of ones, so speeds and
+accelerations map by ``T`` and generalized forces by ``T^T``
+(``f_rel = T^T f_abs``).  In Pinocchio: ``n`` ``JointModelRZ``
 joints, each link a body with its centre of mass at ``(l_i / 2, 0, 0)`` and
 rotational inertia ``I_i`` about z, ``model.gravity.linear = (0, -g, 0)``, and
 the loop closed by a ``RigidConstraintModel`` of type ``CONTACT_3D`` between
@@ -26,7 +30,7 @@ Timed per call from Python (best of several repeats of many calls):
   ``mu`` in a result object);
 * kronlag, C kernel alone: the packed ctypes entry point that
   ``forward_dynamics`` calls (no Python-side copies or result object);
-* kronlag, NumPy backend (no compiler), for information;
+* kronlag, Python backend (no compiler), for information, up to ``n = PYTHON_BACKEND_MAX_N``;
 * Pinocchio: ``pinocchio.constraintDynamics(model, data, q, v, tau,
   constraint_models, constraint_datas, prox_settings)`` (``ddq``; the contact
   forces are left in ``data.lambda_c``).
@@ -50,6 +54,9 @@ from kronlag import models
 
 #: Smoke-test mode (``--quick``): far fewer timed calls.
 QUICK = False
+#: The Python backend is timed (and checked against C) up to this many links only: beyond, its
+#: kernels take longer to build than the whole C comparison.
+PYTHON_BACKEND_MAX_N = 12
 
 
 def chain_parameters(n: int, seed: int = 0) -> tuple[dict[str, float], np.ndarray]:
@@ -108,25 +115,31 @@ def per_call(function, *, number: int, repeat: int = 7) -> float:
     return min(timeit.repeat(function, number=number, repeat=repeat)) / number * 1e6
 
 
-def bench(n: int) -> dict[str, float]:
+def bench(n: int, angles: str) -> dict[str, float]:
     import pinocchio as pin
 
     values, q_ref = chain_parameters(n)
-    eom = kronlag.derive(models.closed_chain(n, "relative"))
+    eom = kronlag.derive(models.closed_chain(n, angles))
     c_model = eom.numeric(values, backend="c")
-    numpy_model = eom.numeric(values, backend="python")
+    numpy_model = eom.numeric(values, backend="python") if n <= PYTHON_BACKEND_MAX_N else None
+    # kronlag coordinates from Pinocchio's (relative) ones: q = T q_rel, T = identity or lower ones
+    T = np.eye(n) if angles == "relative" else np.tril(np.ones((n, n)))
+    q_guess = T @ q_ref + 0.05
     rng = np.random.default_rng(1)
-    q, qd = c_model.assemble(q_ref + 0.05, fixed={"q1": q_ref[0] + 0.05},
-                             qd_guess=rng.uniform(-1, 1, n), qd_fixed={"q1": 0.8})
+    q, qd = c_model.assemble(q_guess, fixed={"q1": q_guess[0]}, qd_guess=rng.uniform(-1, 1, n),
+                             qd_fixed={"q1": 0.8})
+    q_rel, qd_rel = np.linalg.solve(T, q), np.linalg.solve(T, qd)
     forward, constraint_force = pinocchio_chain(n, values)
 
     result = c_model.forward_dynamics(q, qd)
-    ddq = forward(q, qd)
+    ddq = T @ forward(q_rel, qd_rel)
     scale = np.max(np.abs(result.qdd))
     qdd_difference = np.max(np.abs(result.qdd - ddq)) / scale
-    force = -c_model.Phi_q(q).T @ result.lam
-    force_difference = np.max(np.abs(force - constraint_force(q, qd, ddq))) / np.max(np.abs(force))
-    numpy_difference = np.max(np.abs(numpy_model.forward_dynamics(q, qd).qdd - result.qdd)) / scale
+    force = T.T @ (-c_model.Phi_q(q).T @ result.lam)
+    force_difference = (np.max(np.abs(force - constraint_force(q_rel, qd_rel, np.linalg.solve(T, ddq))))
+                        / np.max(np.abs(force)))
+    numpy_difference = (np.max(np.abs(numpy_model.forward_dynamics(q, qd).qdd - result.qdd)) / scale
+                        if numpy_model else 0.0)
     assert qdd_difference < 1e-8, f"qdd differ by {qdd_difference:.2e} (relative)"
     assert force_difference < 1e-6, f"constraint forces differ by {force_difference:.2e} (relative)"
     assert numpy_difference < 1e-10
@@ -137,12 +150,13 @@ def bench(n: int) -> dict[str, float]:
     times = {
         "kronlag C forward_dynamics": per_call(lambda: c_model.forward_dynamics(q, qd), number=20000),
         "kronlag C kernel (ctypes call)": per_call(lambda: packed(*pointers), number=20000),
-        "kronlag NumPy forward_dynamics": per_call(lambda: numpy_model.forward_dynamics(q, qd), number=300),
-        "pinocchio constraintDynamics": per_call(lambda: forward(q, qd), number=20000),
+        "pinocchio constraintDynamics": per_call(lambda: forward(q_rel, qd_rel), number=20000),
     }
-    print(f"\nclosed_chain({n}, 'relative'): m = {n}, r = 2; pinocchio {pin.__version__}")
+    if numpy_model:
+        times["kronlag Python forward_dynamics"] = per_call(lambda: numpy_model.forward_dynamics(q, qd), number=300)
+    print(f"\nclosed_chain({n}, {angles!r}): m = {n}, r = 2; pinocchio {pin.__version__}")
     print(f"  check: |qdd_kronlag - ddq_pinocchio| / |qdd| = {qdd_difference:.1e}, "
-          f"constraint forces {force_difference:.1e}, NumPy vs C {numpy_difference:.1e}")
+          f"constraint forces {force_difference:.1e}, Python vs C {numpy_difference:.1e}")
     reference = times["pinocchio constraintDynamics"]
     for name, value in times.items():
         print(f"  {name:34s} {value:9.2f} us   ratio to pinocchio {value / reference:6.2f}")
@@ -151,15 +165,23 @@ def bench(n: int) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--n", type=int, nargs="+", default=[4, 12], help="numbers of links")
+    parser.add_argument("--n", type=int, nargs="+", default=[4, 12, 20, 30, 40], help="numbers of links")
+    parser.add_argument("--angles", nargs="+", choices=("relative", "absolute"), default=["relative", "absolute"],
+                        help="angle conventions of closed_chain")
     parser.add_argument("--quick", action="store_true", help="smoke test: 100 times fewer calls")
     arguments = parser.parse_args()
     global QUICK
     QUICK = arguments.quick
     print(f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, "
           f"numpy {np.__version__}")
+    summary = []
     for n in arguments.n:
-        bench(n)
+        for angles in arguments.angles:
+            times = bench(n, angles)
+            summary.append((n, angles, times["kronlag C forward_dynamics"] / times["pinocchio constraintDynamics"]))
+    print("\nsummary: kronlag C forward_dynamics / pinocchio constraintDynamics")
+    for n, angles, ratio in summary:
+        print(f"  closed_chain({n:2d}, {angles!r:10s})  {ratio:5.2f}  {'ok' if ratio <= 1.0 else 'OVER'}")
     print("\ntarget: kronlag C forward_dynamics per call no slower than pinocchio constraintDynamics (ratio <= 1)")
 
 

@@ -230,3 +230,95 @@ def test_singular_configuration_is_an_error(backend):
         model.forward_dynamics([0.1, 0.2], [0.0, 1.0], 0.5)
     np.testing.assert_array_equal(error.value.qd, [0.0, 1.0])
     assert error.value.t == 0.5
+
+
+def closed_chain_model(n: int, angles: str, backend: str) -> tuple[kronlag.NumericModel, np.ndarray]:
+    """``closed_chain(n, angles)`` with random links, and a configuration near one where it closes."""
+    rng = np.random.default_rng(n)
+    lengths, masses = rng.uniform(0.5, 1.5, n), rng.uniform(0.5, 2.0, n)
+    relative = rng.uniform(-0.6, 0.6, n) + np.r_[0.3, np.zeros(n - 1)]
+    absolute = np.cumsum(relative)
+    values = {**{f"l{i + 1}": lengths[i] for i in range(n)}, **{f"m{i + 1}": masses[i] for i in range(n)},
+              **{f"I{i + 1}": masses[i] * lengths[i] ** 2 / 12 for i in range(n)},
+              "xg": float(lengths @ np.cos(absolute)), "yg": float(lengths @ np.sin(absolute)), "g": 9.81}
+    model = kronlag.derive(models.closed_chain(n, angles)).numeric(values, backend=backend)
+    return model, relative if angles == "relative" else absolute
+
+
+def dense_augmented_solution(model: kronlag.NumericModel, q, qd, t, alpha, beta) -> tuple[np.ndarray, np.ndarray]:
+    """``[qdd; lambda; mu]`` of ``[[M, G^T], [G, 0]] [qdd; nu] = [h; c]`` by a dense least-squares solve of
+    the whole (m + r + s) system: the minimum-norm solution, so the minimum-norm multipliers when
+    rows of ``G = [Phi_q; A]`` are redundant (singular values below the rank tolerance dropped)."""
+    M, Phi_q, A = model.M(q, t), model.Phi_q(q, t), model.A(q, t)
+    G = np.vstack([Phi_q, A])
+    h = model.f_Q(q, qd, t) - model.Cqd(q, qd, t) - model.g(q, t)
+    c = np.concatenate([model.gamma(q, qd, t) - 2 * alpha * Phi_q @ qd - beta ** 2 * model.Phi(q, t),
+                        model.gamma_nh(q, qd, t) - alpha * (A @ qd + model.b(q, t))])
+    k = len(G)
+    augmented = np.block([[M, G.T], [G, np.zeros((k, k))]])
+    solution = np.linalg.lstsq(augmented, np.concatenate([h, c]), rcond=1e-9)[0]
+    return solution[:model.m], solution[model.m:]
+
+
+def closed_chain_states(n: int, angles: str, backend: str) -> tuple[kronlag.NumericModel, list]:
+    """``closed_chain(n, angles)`` at three assembled states with random consistent speeds."""
+    model, q_near = closed_chain_model(n, angles, backend)
+    states = []
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        q, _ = model.assemble(q_near + rng.uniform(-0.05, 0.05, model.m))
+        qd, Phi_q = rng.uniform(-1, 1, model.m), model.Phi_q(q)
+        states.append((q, qd - np.linalg.pinv(Phi_q) @ (Phi_q @ qd), 0.3 * seed))
+    return model, states
+
+
+def redundant_four_bar_states(backend: str) -> tuple[kronlag.NumericModel, list]:
+    model = four_bar(backend, redundant=True)
+    return model, [(*four_bar_state(model), 0.0)]
+
+
+def double_parallelogram_states(backend: str) -> tuple[kronlag.NumericModel, list]:
+    values = dict(l=0.7, d=1.3, m=1.2, m_c=2.5, J=0.09, J_c=0.6, g=9.81)
+    model = kronlag.derive(double_parallelogram()).numeric(values, backend=backend)
+    states = []
+    for theta, omega in ((0.8, 1.7), (-0.4, 0.6)):
+        q, qd = model.assemble([theta, 0.0, theta, theta], fixed={"q1": theta},
+                               qd_guess=[omega, 0, omega, omega], qd_fixed={"q1": omega})
+        states.append((q, qd, 0.0))
+    return model, states
+
+
+def random_consistent_states(name: str, backend: str) -> tuple[kronlag.NumericModel, list]:
+    model = numeric(name, backend)
+    return model, [consistent_state(model, seed) for seed in range(3)]
+
+
+#: Models and states for the comparison with a dense solve, by case.
+AUGMENTED_CASES = {
+    "closed_chain_12_relative": functools.partial(closed_chain_states, 12, "relative"),
+    "closed_chain_12_absolute": functools.partial(closed_chain_states, 12, "absolute"),
+    "closed_chain_30_absolute": functools.partial(closed_chain_states, 30, "absolute"),
+    "four_bar_redundant": redundant_four_bar_states,
+    "double_parallelogram": double_parallelogram_states,
+    "chaplygin_sleigh": functools.partial(random_consistent_states, "chaplygin_sleigh"),
+    "heavy_top": functools.partial(random_consistent_states, "heavy_top"),
+}
+
+
+@pytest.mark.parametrize("backend", backend_params())
+@pytest.mark.parametrize("case", AUGMENTED_CASES)
+def test_forward_dynamics_matches_a_dense_solve_of_the_augmented_system(case, backend):
+    """The structured solver (null-space QR + Cholesky in C) against NumPy's dense least squares on the
+    full augmented matrix, at random consistent states, with and without Baumgarte terms; redundant
+    constraints included (four-bar with a third loop equation, the double parallelogram)."""
+    model, states = AUGMENTED_CASES[case](backend)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", kronlag.RedundantConstraintsWarning)
+        for q, qd, t in states:
+            for alpha, beta in ((0.0, 0.0), (5.0, 7.0)):
+                result = model.forward_dynamics(q, qd, t, alpha=alpha, beta=beta)
+                qdd, nu = dense_augmented_solution(model, q, qd, t, alpha, beta)
+                np.testing.assert_allclose(result.qdd, qdd, rtol=1e-8, atol=1e-8 * np.max(np.abs(qdd)))
+                multipliers = np.concatenate([result.lam, result.mu])
+                scale = max(1.0, np.max(np.abs(nu), initial=0.0))
+                np.testing.assert_allclose(multipliers, nu, rtol=1e-7, atol=1e-8 * scale)

@@ -103,3 +103,26 @@ def test_mass_matrix_is_positive_definite(equations):
         values = random_values(sorted(equations.M.free_symbols, key=str), rng, state_symbols(equations))
         mass = np.array(evaluate(equations.M, values), dtype=float).reshape(equations.M.shape)
         assert np.linalg.eigvalsh(mass).min() > 0
+
+
+def test_velocity_terms_of_unusual_expressions_equal_C_qd():
+    """The accelerations along the speeds (``Jd qd``) through every kind of node: powers with a
+    coordinate in the exponent, functions of several arguments, square roots, an Euler-angle
+    rigid body (its gyroscopic term); ``eom.Cqd`` against the product ``C qd`` of Eq. 22 and against ``d/dt (M qd) - dT/dq``."""
+    import kronlag
+
+    q1, q2, q3 = kronlag.coordinates("q1 q2 q3")
+    m, inertia = sp.symbols("m J")
+    system = kronlag.System([q1, q2, q3], parameters=[m, inertia], name="unusual")
+    system.add_body(kronlag.PointMass("a", mass=m, position=(
+        sp.atan2(q1, 2 + q2 ** 2), sp.sqrt(1 + q1 ** 2 * q3 ** 2), sp.exp(q2) ** q1)))
+    system.add_body(kronlag.RigidBody("c", mass=m, inertia=sp.diag(inertia, 2 * inertia, 2 * inertia),
+                                      position=(q1 * sp.cos(q2), sp.sin(q1 * q3), sp.tanh(q2 * q3)),
+                                      rotation=kronlag.frames.euler_sequence("zyx", (q1, q2, q3))))
+    equations = kronlag.derive(system)
+    speeds = sp.Matrix(equations.speeds)
+    assert_numerically_equal(equations.Cqd, equations.C * speeds, state_symbols(equations))
+    kinetic = (speeds.T * equations.M * speeds)[0, 0] / 2
+    momentum_rate = time_derivative(equations.M, equations.coordinates, equations.speeds) * speeds
+    lagrange = momentum_rate - sp.Matrix([kinetic.diff(q) for q in equations.coordinates])
+    assert_numerically_equal(equations.Cqd, lagrange, state_symbols(equations))

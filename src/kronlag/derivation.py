@@ -150,6 +150,61 @@ def _bounded_trigsimp(entry: se.Basic) -> se.Basic:
     return se.sympify(sp.trigsimp(expr))
 
 
+class _AlongSpeeds:
+    """Derivatives of expressions of ``q`` along the speeds: ``D x = sum_k dx/dq_k qd_k`` and
+    ``D2 x = sum_jk d2x/dq_j dq_k qd_j qd_k`` (``Jd qd`` for ``J = dx/dq``), by forward
+    differentiation over the expression graph, memoized per node.
+
+    Differentiating ``J`` by every coordinate and contracting twice with ``qd`` (Theorem 1) costs
+    a term per pair of coordinates; along ``qd`` each node is differentiated once, so the
+    acceleration of a link at the end of a chain in relative angles stays a sum over the links
+    (``-sum_a l_a cos(theta_a) omega_a^2``) instead of a sum over pairs of joints.
+    """
+
+    def __init__(self, q: list, qd: list):
+        self.speeds = dict(zip(q, qd))
+        self.memo: dict = {}
+
+    def __call__(self, expr: se.Basic) -> tuple[se.Basic, se.Basic]:
+        """``(D expr, D2 expr)``."""
+        result = self.memo.get(expr)
+        if result is None:
+            result = self.memo[expr] = self._build(expr)
+        return result
+
+    def _build(self, expr: se.Basic) -> tuple[se.Basic, se.Basic]:
+        zero = se.Integer(0)
+        if not expr.args:
+            return self.speeds.get(expr, zero), zero
+        if isinstance(expr, se.Add):
+            parts = [self(arg) for arg in expr.args]
+            return se.Add(*(first for first, _ in parts)), se.Add(*(second for _, second in parts))
+        if isinstance(expr, se.Mul):
+            value, (first, second) = expr.args[0], self(expr.args[0])
+            for factor in expr.args[1:]:
+                factor_first, factor_second = self(factor)
+                second = second * factor + 2 * first * factor_first + value * factor_second
+                first = first * factor + value * factor_first
+                value = value * factor
+            return first, second
+        if isinstance(expr, se.Pow) and self(expr.args[1]) == (zero, zero):
+            base, exponent = expr.args
+            base_first, base_second = self(base)
+            slope, curvature = exponent * base ** (exponent - 1), exponent * (exponent - 1) * base ** (exponent - 2)
+            return slope * base_first, curvature * base_first ** 2 + slope * base_second
+        if isinstance(expr, se.Function) and len(expr.args) == 1:
+            (argument,) = expr.args
+            argument_first, argument_second = self(argument)
+            dummy = se.Dummy()
+            slope = se.diff(expr.func(dummy), dummy)
+            curvature = se.diff(slope, dummy).subs({dummy: argument})
+            slope = slope.subs({dummy: argument})
+            return slope * argument_first, curvature * argument_first ** 2 + slope * argument_second
+        # anything else (a function of several arguments, a coordinate in an exponent): by coordinates
+        first = se.Add(*(se.diff(expr, q) * qd for q, qd in self.speeds.items()))
+        return first, se.Add(*(se.diff(first, q) * qd for q, qd in self.speeds.items()))
+
+
 def _weigh(weight, matrix: se.DenseMatrix) -> se.DenseMatrix:
     """``W matrix`` for a square matrix weight ``W``; a scalar weight is kept apart (see _Accumulator)."""
     return weight * matrix if isinstance(weight, se.DenseMatrix) else matrix
@@ -172,9 +227,10 @@ class _Accumulator:
         self.second_terms: dict[tuple[int, int], list] = defaultdict(list)
         self.velocity_terms: dict[tuple[int, int], list] = defaultdict(list)
 
-    def add(self, jacobian: se.DenseMatrix, weight, *, gradient: bool = True) -> None:
+    def add(self, jacobian: se.DenseMatrix, weight, bias: se.DenseMatrix, *, gradient: bool = True) -> None:
         """Add ``J^T W J``; ``weight`` is a scalar or a symmetric square matrix ``W``.
 
+        ``bias`` is ``Jd qd`` (a column, the rows of ``J``; from :class:`_AlongSpeeds`).
         ``gradient``: ``J`` is the Jacobian of a position or an angle (its
         columns' derivatives are symmetric, ``dJ_i/dq_k = dJ_k/dq_i``); false
         for the angular-velocity Jacobian of a spatial body.
@@ -199,13 +255,17 @@ class _Accumulator:
         _scatter(self.mass_rate_terms, factor, support, support, cross + cross.T, symmetric=True)
         weighted_velocity = (weighted * qd).T  # (W v)^T
         # Velocity terms C qd = Md qd - dT/dq of this body: J^T W (Jd qd) + [(Jd_i - dJ/dq_i qd) . W v]_i;
-        # for a gradient J the bracket vanishes (Jd_i = dJ/dq_i qd).  Summed body by body these stay
-        # small where the entries of C, summed over l, would not.
-        _scatter(self.velocity_terms, factor, support, [0], weighted.T * (jacobian_dot * qd))
+        # for a gradient J the bracket vanishes (Jd_i = dJ/dq_i qd).  For the body-frame angular
+        # velocity omega = J qd of a rigid body (W its central inertia) the bracket is Euler's
+        # gyroscopic term J^T (omega x W omega), far smaller written so.  Summed body by body these
+        # stay small where the entries of C, summed over l, would not.
+        _scatter(self.velocity_terms, factor, support, [0], weighted.T * bias)
         if not gradient:
-            _scatter(self.velocity_terms, factor, support, [0], jacobian_dot.T * weighted_velocity.T)
-            for i, derivative in derivatives.items():
-                _scatter(self.velocity_terms, factor, [i], [0], -weighted_velocity * (derivative * qd))
+            omega, spin = jacobian * qd, weighted * qd
+            gyroscopic = se.DenseMatrix(3, 1, [omega[1] * spin[2] - omega[2] * spin[1],
+                                               omega[2] * spin[0] - omega[0] * spin[2],
+                                               omega[0] * spin[1] - omega[1] * spin[0]])
+            _scatter(self.velocity_terms, factor, support, [0], jacobian.T * gyroscopic)
         for i, derivative in derivatives.items():
             _scatter(self.second_terms, factor, [i], support, weighted_velocity * derivative)
             _scatter(self.second_terms, factor, [i], support, _weigh(weight, derivative * qd).T * jacobian)
@@ -292,17 +352,25 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
     generalized_force = se.zeros(m, 1)
     rotation_jacobians = {}
 
+    along = _AlongSpeeds(q, qd)
+
+    def acceleration_bias(vector: se.DenseMatrix) -> se.DenseMatrix:  # Jd qd for J = d vector/dq
+        return se.DenseMatrix(vector.rows, 1, [along(entry)[1] for entry in vector])
+
     for body in system.bodies:
         position = _se_matrix(body.position)
         mass = se.sympify(body.mass)
-        accumulator.add(_jacobian(position, q), mass)
+        accumulator.add(_jacobian(position, q), mass, acceleration_bias(position))
         if isinstance(body, PlanarBody):
-            angle_jacobian = _jacobian(se.DenseMatrix(1, 1, [se.sympify(body.angle)]), q)
-            accumulator.add(angle_jacobian, se.sympify(body.inertia))
+            angle = se.DenseMatrix(1, 1, [se.sympify(body.angle)])
+            angle_jacobian = _jacobian(angle, q)
+            accumulator.add(angle_jacobian, se.sympify(body.inertia), acceleration_bias(angle))
             rotation_jacobians[body.name] = angle_jacobian
         elif isinstance(body, RigidBody):
             rotation_jacobian = _rotation_jacobian(body, q)
-            accumulator.add(rotation_jacobian, _se_matrix(body.inertia), gradient=False)
+            omega = rotation_jacobian * se.DenseMatrix(m, 1, qd)  # Jd qd = D(J qd) at fixed qd
+            accumulator.add(rotation_jacobian, _se_matrix(body.inertia),
+                            se.DenseMatrix(3, 1, [along(entry)[0] for entry in omega]), gradient=False)
             rotation_jacobians[body.name] = rotation_jacobian
         else:
             assert isinstance(body, PointMass)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property, partial
 from typing import TYPE_CHECKING, Any
 
+import symengine as se
 import sympy as sp
 
 from .calculus import matrix_derivative
@@ -165,11 +166,19 @@ class Equations:
 
     def _acceleration_offset(self, jacobian: sp.MatrixBase, offset: sp.MatrixBase) -> sp.ImmutableMatrix:
         """``-d/dt (jacobian qd + offset)`` at fixed ``qd``: Theorem 1 for q, plus the partial in t."""
+        # differentiated in SymEngine: SymPy's diff of the velocity of closed_chain(30, "relative")
+        # takes 25 s, SymEngine's 0.1 s (and 0.2 s back to SymPy)
         velocity = jacobian * sp.Matrix(self.speeds) + offset
-        rate = velocity.diff(self.time)
-        for q, qd in zip(self.coordinates, self.speeds):
-            rate += velocity.diff(q) * qd
-        return sp.ImmutableMatrix(-rate)
+        coordinates = [se.sympify(q) for q in self.coordinates]
+        speeds = [se.sympify(qd) for qd in self.speeds]
+        time = se.sympify(self.time)
+
+        def rate(entry: sp.Expr) -> sp.Expr:
+            entry = se.sympify(entry)
+            return se.Add(se.diff(entry, time),
+                          *(se.diff(entry, q) * qd for q, qd in zip(coordinates, speeds)))._sympy_()
+
+        return sp.ImmutableMatrix(velocity.rows, velocity.cols, lambda i, j: -rate(velocity[i, j]))
 
     @cached_property
     def kinetic_energy(self) -> sp.Expr:

@@ -33,8 +33,7 @@ static int kronlag_solve(const double *terms, const double *qd, double alpha, do
     memcpy(B, M, sizeof B);
     memcpy(y, h, sizeof y);
     for (int j = 0; j < rho; ++j) {
-        for (int col = 0; col < m; ++col) house_apply(X, m, k, j, tau[j], B + col, m);
-        for (int row = 0; row < m; ++row) house_apply(X, m, k, j, tau[j], B + row * m, 1);
+        house_reflect_symmetric(X, m, k, j, tau[j], B);
         house_apply(X, m, k, j, tau[j], y, 1);
     }
     /* R1^T = W T (second QR, K x rho), so that G = P R1^T Q1^T. Constraint part y1 = Q1^T qdd:
@@ -54,33 +53,15 @@ static int kronlag_solve(const double *terms, const double *qd, double alpha, do
     }
     /* Null-space part y2: (Z^T M Z) y2 = Z^T h - Z^T M Q1 y1, Cholesky (fails if singular). */
     int n = m - rho;
-    double L[m * m], z[m];
-    double largest = 0.0;
-    for (int i = 0; i < n; ++i) if (B[(rho + i) * m + rho + i] > largest) largest = B[(rho + i) * m + rho + i];
+    double *B22 = B + rho * m + rho, *z = qt + rho;
     for (int i = 0; i < n; ++i) {
         double sum = y[rho + i];
         for (int j = 0; j < rho; ++j) sum -= B[(rho + i) * m + j] * qt[j];
         z[i] = sum;
-        for (int j = 0; j <= i; ++j) {
-            double entry = B[(rho + i) * m + rho + j];
-            for (int l = 0; l < j; ++l) entry -= L[i * m + l] * L[j * m + l];
-            if (i == j) {
-                if (!(entry > KRONLAG_CHOLESKY_RTOL * largest)) return 1;
-                L[i * m + i] = sqrt(entry);
-            } else {
-                L[i * m + j] = entry / L[j * m + j];
-            }
-        }
     }
-    for (int i = 0; i < n; ++i) {
-        for (int l = 0; l < i; ++l) z[i] -= L[i * m + l] * z[l];
-        z[i] /= L[i * m + i];
-    }
-    for (int i = n - 1; i >= 0; --i) {
-        for (int l = i + 1; l < n; ++l) z[i] -= L[l * m + i] * z[l];
-        z[i] /= L[i * m + i];
-    }
-    for (int i = 0; i < n; ++i) qt[rho + i] = z[i];
+    /* the multipliers below need the rows 0..rho-1 of B only: B22 may be factorized in place */
+    if (cholesky_upper(B22, n, m)) return 1;
+    cholesky_solve(B22, n, m, z);
     /* Multipliers, minimum norm: R1 P^T nu = Q1^T (h - M qdd) = y1 - B[:rho, :] qt,
      * R1 = T^T W^T, so P^T nu = W T^{-T} (Q1^T (h - M qdd)). */
     double a[k + 1];

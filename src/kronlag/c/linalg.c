@@ -1,6 +1,17 @@
 /* kronlag: dense linear algebra shared by the solvers and the integrators (generated code only
  * includes this file; no allocation, variable-length arrays of the model's dimensions). */
 
+/* With KRONLAG_WIDE_LOOPS (kronlag's own build of the solver part, at -O3), the O(m^2) and O(m^3)
+ * loops of the augmented solve are compiled twice with GCC on x86-64 glibc, for the baseline and
+ * for AVX2, and the loader picks the one the CPU runs (an ifunc): the library stays portable (a
+ * cached one too) and runs four doubles per instruction where it can. */
+#if defined(KRONLAG_WIDE_LOOPS) && defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) \
+    && defined(__GLIBC__)
+#define KRONLAG_WIDE __attribute__((target_clones("avx2", "default"), noinline))
+#else
+#define KRONLAG_WIDE
+#endif
+
 /* Householder QR of the rows x cols matrix a (row-major, leading dimension lda), in place:
  * R in the upper triangle, reflector j (v_j[j] = 1) below the diagonal of column j, tau[j].
  * With perm != NULL, column pivoting by the largest remaining norm (a P = Q R). */
@@ -50,6 +61,65 @@ static void house_apply(const double *a, int rows, int lda, int j, double tau, d
     w *= tau;
     x[j * stride] -= w;
     for (int i = j + 1; i < rows; ++i) x[i * stride] -= w * a[i * lda + j];
+}
+
+/* B <- H_j B H_j for the symmetric m x m matrix B (row-major) and the reflector stored in column j
+ * of a (m x ., leading dimension lda): H B H = B - v w^T - w v^T with u = B v,
+ * w = tau u - (tau^2 v^T u / 2) v.  Every loop runs along rows (vectorizable), unlike m calls
+ * of house_apply on the columns of B. */
+KRONLAG_WIDE static void house_reflect_symmetric(const double *a, int m, int lda, int j, double tau, double *B)
+{
+    if (tau == 0.0) return;
+    double v[m], u[m];
+    for (int i = 0; i < m; ++i) { v[i] = i > j ? a[i * lda + j] : 0.0; u[i] = 0.0; }
+    v[j] = 1.0;
+    for (int l = j; l < m; ++l)                     /* u = B v = sum_l v_l B[l, :] (B symmetric) */
+        for (int i = 0; i < m; ++i) u[i] += v[l] * B[l * m + i];
+    double s = 0.0;
+    for (int i = j; i < m; ++i) s += v[i] * u[i];
+    double half = 0.5 * tau * tau * s;
+    for (int i = 0; i < m; ++i) u[i] = tau * u[i] - half * v[i];
+    for (int row = 0; row < m; ++row) {
+        double vr = v[row], ur = u[row];
+        for (int i = 0; i < m; ++i) B[row * m + i] -= vr * u[i] + ur * v[i];
+    }
+}
+
+/* Cholesky factorization A = U^T U of the n x n symmetric matrix A (upper triangle read; row-major,
+ * leading dimension lda), U written over the upper triangle, right-looking (row updates,
+ * vectorizable).  Returns 1, a singular configuration, when a pivot is not above
+ * KRONLAG_CHOLESKY_RTOL times the largest diagonal entry of A, else 0. */
+KRONLAG_WIDE static int cholesky_upper(double *A, int n, int lda)
+{
+    double largest = 0.0;
+    for (int i = 0; i < n; ++i) if (A[i * lda + i] > largest) largest = A[i * lda + i];
+    double pivot_row[n + 1];  /* a copy the compiler knows apart from A: the updates vectorize */
+    for (int p = 0; p < n; ++p) {
+        double *row = A + p * lda;
+        if (!(row[p] > KRONLAG_CHOLESKY_RTOL * largest)) return 1;
+        double pivot = sqrt(row[p]), inverse = 1.0 / pivot;
+        row[p] = pivot;
+        for (int c = p + 1; c < n; ++c) pivot_row[c] = row[c] *= inverse;
+        for (int i = p + 1; i < n; ++i) {
+            double factor = pivot_row[i], *target = A + i * lda;
+            for (int c = i; c < n; ++c) target[c] -= factor * pivot_row[c];
+        }
+    }
+    return 0;
+}
+
+/* x <- (U^T U)^-1 x with the factor of cholesky_upper. */
+KRONLAG_WIDE static void cholesky_solve(const double *U, int n, int lda, double *x)
+{
+    for (int i = 0; i < n; ++i) {                     /* U^T y = x, by columns of U^T */
+        x[i] /= U[i * lda + i];
+        for (int c = i + 1; c < n; ++c) x[c] -= U[i * lda + c] * x[i];
+    }
+    for (int i = n - 1; i >= 0; --i) {                /* U x = y */
+        double sum = x[i];
+        for (int c = i + 1; c < n; ++c) sum -= U[i * lda + c] * x[c];
+        x[i] = sum / U[i * lda + i];
+    }
 }
 
 /* LU factorization with partial pivoting of the n x n row-major matrix a, in place.

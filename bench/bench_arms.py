@@ -1,0 +1,130 @@
+#!/usr/bin/env python3
+"""Forward dynamics of spatial serial arms per call: kronlag against Pinocchio's ``aba``.
+
+Run by hand (not a pytest test; needs ``pip install pin``)::
+
+    python3 bench/bench_arms.py            # UR5 and Panda
+    python3 bench/bench_arms.py --quick    # smoke test: 100 times fewer calls
+
+The arms are ``kronlag.models.ur5()`` (6 joints, standard DH) and ``panda()`` (7 joints,
+modified DH).  The Pinocchio model is built from the kronlag model's bodies, not from the DH
+tables, so that both describe the same arm: for body ``i`` at ``q = 0`` its rotation ``R_i``,
+its centre of mass ``c_i``, the world axis ``a_i = vee(dR_i/dq_i R_i^T)`` of joint ``i`` and a
+point ``p_i = c_i + a_i x dc_i/dq_i`` on that axis give a ``JointModelRZ`` whose frame has its z
+axis along ``a_i`` at ``p_i``, and the body's mass and central inertia placed at ``(R_i, c_i)``
+in it.  Gravity ``g = 9.81`` along -z in both, the same joint torques.
+
+Timed per call from Python, best of several repeats:
+
+* kronlag, C backend: ``model.forward_dynamics(q, qd)`` (``qdd`` in a result object);
+* Pinocchio: ``pinocchio.aba(model, data, q, v, tau)``;
+* for information: ``model.M(q)`` against ``pinocchio.crba``.
+
+Before timing, the mass matrices and accelerations are checked against each other at a random
+state (relative differences printed; the run stops if they exceed 1e-9).
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import timeit
+
+import numpy as np
+import sympy as sp
+
+import kronlag
+from kronlag import models
+
+QUICK = False
+ARMS = ("ur5", "panda")
+
+
+def per_call(function, *, number: int = 20000, repeat: int = 7) -> float:
+    """Best time per call in microseconds (``number`` divided by 100 with ``--quick``)."""
+    number = max(1, number // 100) if QUICK else number
+    return min(timeit.repeat(function, number=number, repeat=repeat)) / number * 1e6
+
+
+def _frame_along(axis: np.ndarray, point: np.ndarray):
+    """An SE3 at ``point`` whose z axis is the unit vector ``axis``."""
+    import pinocchio as pin
+
+    helper = np.eye(3)[np.argmin(np.abs(axis))]
+    x = np.cross(helper, axis)
+    x /= np.linalg.norm(x)
+    return pin.SE3(np.column_stack([x, np.cross(axis, x), axis]), point)
+
+
+def pinocchio_arm(system: kronlag.System):
+    """The serial arm of revolute joints ``system`` (body i moved by q_1..q_i) as a Pinocchio model."""
+    import pinocchio as pin
+
+    zero = {coordinate: 0 for coordinate in system.coordinates}
+    model = pin.Model()
+    parent, parent_frame = 0, pin.SE3.Identity()
+    for i, (coordinate, body) in enumerate(zip(system.coordinates, system.bodies)):
+        rotation = np.array(body.rotation.subs(zero), dtype=float)
+        centre = np.array(body.position.subs(zero), dtype=float).ravel()
+        spin = np.array(body.rotation.diff(coordinate).subs(zero), dtype=float) @ rotation.T
+        axis = np.array([spin[2, 1], spin[0, 2], spin[1, 0]])
+        velocity = np.array(body.position.diff(coordinate).subs(zero), dtype=float).ravel()
+        frame = _frame_along(axis, centre + np.cross(axis, velocity))
+        joint = model.addJoint(parent, pin.JointModelRZ(), parent_frame.inverse() * frame, f"joint{i + 1}")
+        inertia = pin.Inertia(float(body.mass), np.zeros(3), np.array(body.inertia, dtype=float))
+        model.appendBodyToJoint(joint, inertia, frame.inverse() * pin.SE3(rotation, centre))
+        parent, parent_frame = joint, frame
+    model.gravity.linear = np.array([0.0, 0.0, -9.81])
+    return model
+
+
+def bench(name: str) -> dict[str, float]:
+    import pinocchio as pin
+
+    system = getattr(models, name)()
+    eom = kronlag.derive(system)
+    rng = np.random.default_rng(3)
+    torques = rng.uniform(-2, 2, eom.shape[0])
+    values = {"g": 9.81, **{f"tau{i + 1}": torque for i, torque in enumerate(torques)}}
+    model = eom.numeric(values, backend="c")
+    arm = pinocchio_arm(system)
+    data = arm.createData()
+    q, qd = rng.uniform(-np.pi, np.pi, model.m), rng.uniform(-1, 1, model.m)
+
+    mass_difference = np.max(np.abs(model.M(q) - pin.crba(arm, data, q))) / np.max(np.abs(model.M(q)))
+    qdd = model.forward_dynamics(q, qd).qdd
+    qdd_difference = np.max(np.abs(qdd - pin.aba(arm, data, q, qd, torques))) / np.max(np.abs(qdd))
+    assert mass_difference < 1e-9 and qdd_difference < 1e-9, (mass_difference, qdd_difference)
+    times = {
+        "kronlag C forward_dynamics": per_call(lambda: model.forward_dynamics(q, qd)),
+        "pinocchio aba": per_call(lambda: pin.aba(arm, data, q, qd, torques)),
+        "kronlag C M": per_call(lambda: model.M(q)),
+        "pinocchio crba": per_call(lambda: pin.crba(arm, data, q)),
+    }
+    print(f"\n{name}: m = {model.m}; pinocchio {pin.__version__}")
+    print(f"  check: M differs by {mass_difference:.1e}, qdd by {qdd_difference:.1e} (relative)")
+    for label, reference in (("kronlag C forward_dynamics", "pinocchio aba"), ("kronlag C M", "pinocchio crba")):
+        for key in (label, reference):
+            print(f"  {key:28s} {times[key]:8.2f} us   ratio to {reference} {times[key] / times[reference]:6.2f}")
+    return times
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
+    parser.add_argument("--quick", action="store_true", help="smoke test: 100 times fewer calls")
+    arguments = parser.parse_args()
+    global QUICK
+    QUICK = arguments.quick
+    print(f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, "
+          f"numpy {np.__version__}, sympy {sp.__version__}")
+    summary = {name: bench(name) for name in arguments.arms}
+    print("\nsummary: kronlag C forward_dynamics / pinocchio aba")
+    for name, times in summary.items():
+        ratio = times["kronlag C forward_dynamics"] / times["pinocchio aba"]
+        print(f"  {name:6s} {ratio:5.2f}  {'ok' if ratio <= 1.0 else 'OVER'}")
+    print("\ntarget: kronlag C forward_dynamics per call no slower than pinocchio aba (ratio <= 1)")
+
+
+if __name__ == "__main__":
+    main()
