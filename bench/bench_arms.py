@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Forward dynamics of spatial serial arms per call: kronlag against Pinocchio's ``aba``.
+"""Spatial serial arms per call: kronlag's forward dynamics and accessors against Pinocchio's
+``aba``, ``crba``, ``computeGeneralizedGravity`` and ``nonLinearEffects``.
 
 Run by hand (not a pytest test; needs ``pip install pin``)::
 
@@ -16,8 +17,10 @@ in it.  Gravity ``g = 9.81`` along -z in both, the same joint torques.
 
 Timed per call from Python, best of several repeats:
 
-* kronlag, C backend: ``model.forward_dynamics(q, qd)`` (``qdd`` in a result object);
-* Pinocchio: ``pinocchio.aba(model, data, q, v, tau)``;
+* kronlag, C backend: ``model.forward_dynamics(q, qd)`` (``qdd`` in a result object),
+  ``model.M(q)``, ``model.g(q)``, ``model.Cqd(q, qd)``;
+* Pinocchio: ``aba(model, data, q, v, tau)``, ``crba``, ``computeGeneralizedGravity`` and
+  ``nonLinearEffects`` (``C qd + g``: a little more than kronlag's ``Cqd``);
 * for information: ``model.M(q)`` against ``pinocchio.crba``.
 
 Before timing, the mass matrices and accelerations are checked against each other at a random
