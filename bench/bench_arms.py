@@ -20,11 +20,10 @@ Timed per call from Python, best of several repeats:
 * kronlag, C backend: ``model.forward_dynamics(q, qd)`` (``qdd`` in a result object),
   ``model.M(q)``, ``model.g(q)``, ``model.Cqd(q, qd)``;
 * Pinocchio: ``aba(model, data, q, v, tau)``, ``crba``, ``computeGeneralizedGravity`` and
-  ``nonLinearEffects`` (``C qd + g``: a little more than kronlag's ``Cqd``);
-* for information: ``model.M(q)`` against ``pinocchio.crba``.
+  ``nonLinearEffects`` (``C qd + g``: a little more than kronlag's ``Cqd``).
 
-Before timing, the mass matrices and accelerations are checked against each other at a random
-state (relative differences printed; the run stops if they exceed 1e-9).
+Before timing, M, the accelerations, g and ``C qd + g`` are checked against each other at a
+random state (relative differences printed; the run stops if they exceed 1e-9).
 """
 
 from __future__ import annotations
