@@ -231,50 +231,25 @@ def test_unsupported_function_is_a_clear_error():
 BENCH = Path(__file__).resolve().parents[1] / "bench"
 
 
-@pytest.mark.slow
 @needs_compiler
-def test_bench_build_smoke():
-    process = subprocess.run([sys.executable, str(BENCH / "bench_build.py"), "--n", "4"], capture_output=True,
-                             text=True, timeout=1800)
+@pytest.mark.parametrize("script, arguments, peer, expected", [
+    pytest.param("bench_build.py", ["--n", "4"], None, ["closed_chain(4, 'relative')", "compilation"],
+                 marks=pytest.mark.slow),
+    pytest.param("bench_forward_dynamics.py", ["--n", "3", "--quick"], "pinocchio", ["pinocchio constraintDynamics"],
+                 marks=pytest.mark.slow),
+    pytest.param("bench_arms.py", ["--arms", "ur5", "--quick"], "pinocchio", ["pinocchio aba", "ur5"],
+                 marks=pytest.mark.slow),
+    ("bench_accessors.py", ["--quick"], "pinocchio", ["pinocchio crba", "nonLinearEffects"]),
+    ("bench_batch.py", ["--states", "2000"], None, ["batch speed-up over the loop"]),
+])
+def test_bench_smoke(script, arguments, peer, expected):
+    """The benchmarks run (quick mode) and print their tables."""
+    if peer:
+        pytest.importorskip(peer)
+    process = subprocess.run([sys.executable, str(BENCH / script), *arguments], capture_output=True, text=True,
+                             timeout=1800)
     assert process.returncode == 0, process.stdout + process.stderr
-    assert "closed_chain(4, 'relative')" in process.stdout and "compilation" in process.stdout
-
-
-@pytest.mark.slow
-@needs_compiler
-def test_bench_forward_dynamics_smoke():
-    pytest.importorskip("pinocchio")
-    process = subprocess.run([sys.executable, str(BENCH / "bench_forward_dynamics.py"), "--n", "3", "--quick"],
-                             capture_output=True, text=True, timeout=1800)
-    assert process.returncode == 0, process.stdout + process.stderr
-    assert "pinocchio constraintDynamics" in process.stdout
-
-
-@pytest.mark.slow
-@needs_compiler
-def test_bench_arms_smoke():
-    pytest.importorskip("pinocchio")
-    process = subprocess.run([sys.executable, str(BENCH / "bench_arms.py"), "--arms", "ur5", "--quick"],
-                             capture_output=True, text=True, timeout=1800)
-    assert process.returncode == 0, process.stdout + process.stderr
-    assert "pinocchio aba" in process.stdout and "ur5" in process.stdout
-
-
-@needs_compiler
-def test_bench_accessors_smoke():
-    pytest.importorskip("pinocchio")
-    process = subprocess.run([sys.executable, str(BENCH / "bench_accessors.py"), "--quick"],
-                             capture_output=True, text=True, timeout=300)
-    assert process.returncode == 0, process.stdout + process.stderr
-    assert "pinocchio crba" in process.stdout and "nonLinearEffects" in process.stdout
-
-
-@needs_compiler
-def test_bench_batch_smoke():
-    process = subprocess.run([sys.executable, str(BENCH / "bench_batch.py"), "--states", "2000"],
-                             capture_output=True, text=True, timeout=300)
-    assert process.returncode == 0, process.stdout + process.stderr
-    assert "batch speed-up over the loop" in process.stdout
+    assert all(text in process.stdout for text in expected), process.stdout
 
 
 @needs_compiler
