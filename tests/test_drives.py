@@ -344,3 +344,19 @@ def test_a_time_dependent_velocity_constraint():
     np.testing.assert_allclose(trajectory.q[:, 1], 0.3 * times, atol=1e-8)
     np.testing.assert_allclose(-trajectory.mu[:, 0], -2.0 * np.sin(times), atol=1e-7)
     np.testing.assert_allclose(trajectory.energy_balance, 0, atol=1e-7)
+
+
+def test_motions_that_stop_for_an_instant_pass_the_constraint_checks(capsys):
+    """The five-bar file's drives swing both arms (speed zero at t = 0.25, 0.75); a state at rest
+    computed with rounding is consistent too."""
+    from kronlag.cli import main
+
+    assert main(["inverse", "five_bar", "--points", "5"]) == 0
+    assert "max |force|: theta1" in capsys.readouterr().out
+    free = kronlag.derive(models.slider_crank()).numeric(SLIDER)
+    q, qd = free.assemble([0.5, -0.1, 0.4])
+    result = free.inverse_dynamics(q, qd + 1e-16, np.full(3, 1e-17), actuated=["q1"])
+    # at rest the crank torque holds the weights: tau = dV/dtheta of the reduced potential
+    angle = sp.Symbol("angle")
+    _, _, lagrangian = slider_crank_reference(angle + 0 * T)  # at rest: L = -V(angle)
+    np.testing.assert_allclose(result.forces, [float(-lagrangian.diff(angle).subs(angle, q[0]))], rtol=1e-9)

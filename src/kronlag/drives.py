@@ -194,7 +194,7 @@ def _advance(model: NumericModel, state: tuple, time: float, tol: float, *, dept
     h = time - start
     predictor = previous + h * speed + h * h / 2 * acceleration
     try:
-        q, qd = model.assemble(predictor, qd_guess=speed, t=time, tol=tol)
+        q, qd = model.assemble(predictor, t=time, tol=tol)  # qd unique: solved afresh, no cancellation
         correction = np.max(np.abs(q - predictor))
         displacement = np.max(np.abs(predictor - previous))
         close = correction <= BRANCH_RATIO * displacement + 1e3 * tol * (1 + np.max(np.abs(q)))

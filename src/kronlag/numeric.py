@@ -713,7 +713,9 @@ class NumericModel:
         constraint_tol : float
             Relative tolerance of the constraint checks, with the scales ``1 + max |q|``
             for positions, ``max |G| max |qd| + |Phi_t_j|`` for velocities and
-            ``max |G| max |qdd| + |gamma_j|`` for accelerations (``G = [Phi_q; A]``).
+            ``max |G| max |qdd| + |gamma_j|`` for accelerations (``G = [Phi_q; A]``; the
+            largest ``|qd|``, ``|qdd|`` of the whole motion in
+            :meth:`inverse_dynamics_trajectory`).
 
         Returns
         -------
@@ -824,17 +826,21 @@ class NumericModel:
         jacobian = np.concatenate([terms["Phi_q"][:, rows], terms["A"]], axis=1)
         offset = np.concatenate([terms["Phi_t"][:, rows], terms["b"]], axis=1)
         rate = np.concatenate([terms["gamma"][:, rows], terms["gamma_nh"]], axis=1)
+        # speeds and accelerations are compared with their largest along the whole motion: where the
+        # motion stops for an instant, rounding (relative to the motion's own size) would otherwise count
         magnitude = np.max(np.abs(jacobian), axis=(1, 2), initial=0.0)[:, None]
+        speed, acceleration = (np.max(np.abs(x), initial=0.0) for x in (qd, qdd))
         phi = terms["Phi"][:, rows]
         size = 1.0 + np.max(np.abs(q), axis=1, initial=0.0)[:, None]
         levels = [("position", "Phi", names[:len(rows)], phi, np.broadcast_to(size, phi.shape)),
                   ("velocity", "Phi_q qd + Phi_t (A qd + b)", names, np.einsum("nij,nj->ni", jacobian, qd) + offset,
-                   magnitude * np.max(np.abs(qd), axis=1)[:, None] + np.abs(offset)),
+                   magnitude * speed + np.abs(offset)),
                   ("acceleration", "Phi_q qdd - gamma (A qdd - gamma_nh)", names,
                    np.einsum("nij,nj->ni", jacobian, qdd) - rate,
-                   magnitude * np.max(np.abs(qdd), axis=1)[:, None] + np.abs(rate))]
+                   magnitude * acceleration + np.abs(rate))]
+        rounding = 1e3 * np.finfo(float).eps * magnitude  # a motion at rest still carries this much
         for level, formula, level_names, residual, scale in levels:
-            excess = np.abs(residual) - tol * scale
+            excess = np.abs(residual) - tol * scale - (0.0 if level == "position" else rounding)
             if residual.size and np.max(excess) > 0:
                 i, j = np.unravel_index(np.argmax(excess), excess.shape)
                 raise ValueError(f"the motion violates constraint {level_names[j]!r} at {level} level at "
