@@ -77,11 +77,13 @@ def _new_figure(*, show: bool = False, **options) -> Figure:
     return Figure(**options)
 
 
-def _math_label(name: str, *, dotted: bool = False) -> str:
-    """Mathtext label of a symbol name, dotted for its velocity: ``"phi1"`` -> ``$\\dot{\\phi}_{1}$``."""
-    if dotted:  # SymPy prints the modifier suffix "dot" of a base name as an accent over it
+def _math_label(name: str, *, dots: int = 0) -> str:
+    """Mathtext label of a symbol name, with ``dots`` accents for its time derivatives:
+    ``"phi1"``, 1 -> ``$\\dot{\\phi}_{1}$``; 2 -> ``$\\ddot{\\phi}_{1}$``."""
+    if dots:  # SymPy prints the modifier suffixes "dot", "ddot" of a base name as accents over it
         base, superscripts, subscripts = split_super_sub(name)
-        name = base + "dot" + "".join(f"_{s}" for s in subscripts) + "".join(f"^{s}" for s in superscripts)
+        name = (base + {1: "dot", 2: "ddot"}[dots] + "".join(f"_{s}" for s in subscripts)
+                + "".join(f"^{s}" for s in superscripts))
     return f"${sp.latex(sp.Symbol(name))}$"
 
 
@@ -103,9 +105,9 @@ def _with_unit(label: str, unit: str | None) -> str:
     return f"{label} ({unit})" if unit else label
 
 
-def _rate_unit(unit: str | None, units: Mapping[str, str]) -> str | None:
-    """The unit of a time derivative, ``unit/s``, when both units are known."""
-    return f"{unit}/{units['t']}" if unit and "t" in units else None
+def _rate_unit(unit: str | None, units: Mapping[str, str], order: int = 1) -> str | None:
+    """The unit of a time derivative of order ``order``, ``unit/s`` or ``unit/s^2``, when both units are known."""
+    return f"{unit}/{units['t']}{'' if order == 1 else f'^{order}'}" if unit and "t" in units else None
 
 
 def _coordinates_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
@@ -116,7 +118,7 @@ def _coordinates_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -
 
 def _velocities_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
     _plot_series(axes, traj.t, traj.qd,
-                 [_with_unit(_math_label(name, dotted=True), _rate_unit(units.get(name), units))
+                 [_with_unit(_math_label(name, dots=1), _rate_unit(units.get(name), units))
                   for name in traj.coordinate_names],
                  title="Velocities", ylabel=r"$\dot{q}$")
 
@@ -358,8 +360,10 @@ def plot_kinematics(run: Kinematics, *, path: str | PathLike | None = None, show
     names = run.coordinate_names
     series = _kinematic_series(run, units)
     series[1:1] = [("Speeds", r"$\dot{q}$", run.qd,
-                    [_with_unit(_math_label(name, dotted=True), _rate_unit(units.get(name), units)) for name in names]),
-                   ("Accelerations", r"$\ddot{q}$", run.qdd, [_math_label(f"{name}dd") for name in names])]
+                    [_with_unit(_math_label(name, dots=1), _rate_unit(units.get(name), units)) for name in names]),
+                   ("Accelerations", r"$\ddot{q}$", run.qdd, [_with_unit(_math_label(name, dots=2),
+                                                                              _rate_unit(units.get(name), units, 2))
+                                                                   for name in names])]
     return _series_figure(run, series, f"kinematic analysis: {len(run.t)} samples", units=units, path=path,
                           show=show)
 
