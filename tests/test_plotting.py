@@ -184,3 +184,19 @@ def test_inverse_dynamics_figure_shows_the_joint_forces():
     assert _titles(figure)[-1] == "Joint reaction forces"
     assert _legend_labels(figure.axes[-1]) == ["pin"] and figure.axes[-1].get_ylabel() == "$|F|$ (N)"
     np.testing.assert_allclose(figure.axes[-1].lines[0].get_ydata(), 5 * t)
+
+
+def test_kinematics_figure():
+    from kronlag.drives import Kinematics
+    from kronlag.plotting import plot_kinematics
+
+    t = np.linspace(0.0, 1.0, 11)
+    q = np.column_stack([t, 2 * t])
+    point = {"position": np.column_stack([np.cos(t), np.sin(t)]), "velocity": np.zeros((11, 2)),
+             "acceleration": np.zeros((11, 2))}
+    run = Kinematics(t, q, np.ones_like(q), np.zeros_like(q), ("a", "x"), {"P": point})
+    figure = plot_kinematics(run, units={"a": "rad", "x": "m", "t": "s"})
+    assert _titles(figure) == ["Coordinates", "Speeds", "Accelerations", "Points"]
+    assert _legend_labels(figure.axes[2]) == [r"$\ddot{a}$ (rad/s^2)", r"$\ddot{x}$ (m/s^2)"]
+    assert _legend_labels(figure.axes[3]) == ["P x", "P y"]
+    np.testing.assert_array_equal(figure.axes[3].lines[1].get_ydata(), np.sin(t))
