@@ -72,17 +72,9 @@ def kronlag_times() -> dict[str, float]:
 
 def pinocchio_times(values, model, q, qd) -> dict[str, float]:
     import pinocchio as pin
-    from bench_forward_dynamics import pinocchio_chain
+    from bench_forward_dynamics import pinocchio_chain, pinocchio_links
 
-    pin_model = pin.Model()
-    parent, placement = 0, pin.SE3.Identity()
-    for i in range(1, N_LINKS + 1):
-        length, mass, inertia = values[f"l{i}"], values[f"m{i}"], values[f"I{i}"]
-        joint = pin_model.addJoint(parent, pin.JointModelRZ(), placement, f"joint{i}")
-        pin_model.appendBodyToJoint(joint, pin.Inertia(mass, np.array([length / 2, 0.0, 0.0]),
-                                                       np.diag([inertia] * 3)), pin.SE3.Identity())
-        parent, placement = joint, pin.SE3(np.eye(3), np.array([length, 0.0, 0.0]))
-    pin_model.gravity.linear = np.array([0.0, -values["g"], 0.0])
+    pin_model, _, _ = pinocchio_links(N_LINKS, values)
     data = pin_model.createData()
     mass_matrix = pin.crba(pin_model, data, q)
     mass_matrix = np.triu(mass_matrix) + np.triu(mass_matrix, 1).T

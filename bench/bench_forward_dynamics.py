@@ -75,8 +75,8 @@ def chain_parameters(n: int, seed: int = 0) -> tuple[dict[str, float], np.ndarra
     return values, q_ref
 
 
-def pinocchio_chain(n: int, values: dict[str, float]):
-    """The same chain as a Pinocchio model with a tip-to-ground CONTACT_3D constraint."""
+def pinocchio_links(n: int, values: dict[str, float]):
+    """The open chain of ``n`` links as a Pinocchio model: ``(model, tip joint, tip placement in it)``."""
     import pinocchio as pin
 
     model = pin.Model()
@@ -88,6 +88,14 @@ def pinocchio_chain(n: int, values: dict[str, float]):
                                                    np.diag([inertia, inertia, inertia])), pin.SE3.Identity())
         parent, placement = joint, pin.SE3(np.eye(3), np.array([length, 0.0, 0.0]))
     model.gravity.linear = np.array([0.0, -values["g"], 0.0])
+    return model, parent, placement
+
+
+def pinocchio_chain(n: int, values: dict[str, float]):
+    """The same chain as a Pinocchio model with a tip-to-ground CONTACT_3D constraint."""
+    import pinocchio as pin
+
+    model, parent, placement = pinocchio_links(n, values)
     constraint = pin.RigidConstraintModel(
         pin.ContactType.CONTACT_3D, model, parent, placement, 0,
         pin.SE3(np.eye(3), np.array([values["xg"], values["yg"], 0.0])), pin.ReferenceFrame.LOCAL)

@@ -5,7 +5,6 @@ import numpy as np
 import sympy as sp
 
 import kronlag
-from kronlag.joints import free_body, mechanism
 
 FOUR_BAR = dict(l1=0.2, l2=0.6, l3=0.5, l4=0.5, m1=1, m2=3, m3=2.5, I1=0.0033, I2=0.09, I3=0.052, g=9.81)
 

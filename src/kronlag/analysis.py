@@ -206,15 +206,15 @@ def equilibrium(model: NumericModel, q_guess, *, fixed: Mapping | None = None, t
     """
     functions = _tangent(model)
     m, r = model.m, model.r
-    moving = np.max(np.abs(model.Phi_t(model._vector(q_guess, "q_guess"), t)), initial=0.0)
-    if moving > 0:
-        raise EquilibriumError(f"no static equilibrium of {model.equations.system.name} at t = {t:g}: its drives "
-                               f"move there (max |Phi_t| = {moving:.3g}); hold coordinates with fixed=... instead",
-                               moving)
     try:
         q, _ = model.assemble(q_guess, fixed=fixed, t=t)
     except AssemblyError as error:
         raise EquilibriumError(f"no equilibrium: {error}", error.residual) from error
+    moving = np.max(np.abs(model.Phi_t(q, t)), initial=0.0)
+    if moving > tol:
+        raise EquilibriumError(f"no static equilibrium of {model.equations.system.name} at t = {t:g}: its drives "
+                               f"move there (max |Phi_t| = {moving:.3g}); hold coordinates with fixed=... instead",
+                               moving)
     held = sorted(model._held(fixed, q.copy()))
     free = [i for i in range(m) if i not in held]
     p = model.parameter_vector(t)

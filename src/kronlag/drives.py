@@ -172,7 +172,6 @@ def _point_names(model: NumericModel, points: Sequence[str] | None) -> list[str]
     return names
 
 
-
 class _Stop(Exception):
     """Ends a kinematic analysis early; the text is the result's message."""
 
@@ -224,15 +223,26 @@ def _check_regular(model: NumericModel, time: float, q: np.ndarray) -> None:
                     "the positions may switch assembly branch; the analysis stops here")
 
 
+def _mechanism_rows(model: NumericModel) -> list[int]:
+    """The holonomic constraint rows that are not drives."""
+    system = model.equations.system
+    return [j for j, item in enumerate(system.constraints) if item.name not in system.drives]
+
+
+def _freedom_without_drives(model: NumericModel, q, time: float) -> int:
+    """Degrees of freedom at ``q`` of the mechanism without its drives: ``m - rank Phi_q`` of the other rows."""
+    jacobian = model.Phi_q(np.asarray(q, dtype=float), time)[_mechanism_rows(model)]
+    return model.m - numerical_rank(rank_magnitudes(jacobian)[0], model.rank_rtol)
+
+
 def _diagnose_overdriven(model: NumericModel, q_guess, time: float) -> None:
     """ModelError when there are more drives than the mechanism without them has degrees of freedom."""
-    system = model.equations.system
-    kept = [j for j, item in enumerate(system.constraints) if item.name not in system.drives]
-    freedom = model.m - numerical_rank(rank_magnitudes(model.Phi_q(np.asarray(q_guess, float), time)[kept])[0],
-                                       model.rank_rtol)
-    if len(system.drives) > freedom:
-        raise ModelError(f"{system.name} is over-driven: {len(system.drives)} drives ({', '.join(system.drives)}) "
-                         f"for {freedom} degree(s) of freedom")
+    drives = model.equations.system.drives
+    freedom = _freedom_without_drives(model, q_guess, time)
+    if len(drives) > freedom:
+        raise ModelError(f"{model.equations.system.name} is over-driven: {len(drives)} drives "
+                         f"({', '.join(drives)}) for {freedom} degree(s) of freedom")
+
 
 def kinematic_analysis(model: NumericModel, t, q_guess, *, points: Sequence[str] | None = None,
                        tol: float = 1e-12) -> Kinematics:
@@ -351,11 +361,10 @@ def inverse_dynamics(model: NumericModel, t, q_guess, *, actuated: Sequence[str]
         labels, constraints, columns = tuple(system.drives), None, ()
     else:
         labels, columns = tuple(str(name) for name in actuated), tuple(actuated)
-        constraints = [j for j in range(model.r) if j not in drive_rows]
+        constraints = _mechanism_rows(model)
     motion = kinematic_analysis(model, t, q_guess, points=points, tol=tol)
     if actuated is not None and len(motion.t):
-        freedom = model.m - numerical_rank(rank_magnitudes(model.Phi_q(motion.q[0], motion.t[0])[constraints])[0],
-                                           model.rank_rtol)
+        freedom = _freedom_without_drives(model, motion.q[0], motion.t[0])
         if len(columns) < freedom:
             raise ModelError(f"under-actuated: {len(columns)} actuator(s) {list(columns)} for the {freedom} degrees "
                              f"of freedom of {system.name} without its drives")

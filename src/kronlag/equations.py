@@ -139,7 +139,7 @@ class Equations:
         (rheonomic); the velocity constraints are ``Phi_q qd + Phi_t = 0``."""
         return sp.ImmutableMatrix(self.Phi.diff(self.time))
 
-    @property
+    @cached_property
     def rheonomic(self) -> bool:
         """Whether a constraint depends on the time (a drive)."""
         return self.time in set().union(*(entry.free_symbols for entry in (*self.Phi, *self.b)))

@@ -101,6 +101,7 @@ from .system import (
     RigidBody,
     RotationSequence,
     System,
+    drive_name,
     speed_symbol,
     t,
 )
@@ -680,7 +681,7 @@ def _read_settings(reader: _Reader, document: dict, model: ModelFile) -> None:
             if not target.free_symbols & set(model.system.coordinates) or t in target.free_symbols:
                 raise reader.error(f"{entry}.target", "must be an expression of the coordinates (not of t: "
                                                       "the motion gives the time dependence)")
-        name = (reader.string(table["name"], f"{entry}.name") if "name" in table else f"drive {target}")
+        name = (reader.string(table["name"], f"{entry}.name") if "name" in table else drive_name(target))
         if name in model.drives:
             raise reader.error(entry, f"the drive {name!r} is given twice")
         model.drives[name] = PrescribedMotion(target, reader.expression(table["motion"], f"{entry}.motion",

@@ -162,6 +162,19 @@ def split_terms(kernel: codegen.Kernel, flat: np.ndarray) -> dict[str, np.ndarra
             for name, offset, shape in codegen.layout("dynamics", *codegen.dynamics_shape(kernel))}
 
 
+def _pseudo_inverses(matrices: np.ndarray, rank_rtol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pseudo-inverses (N, c, r) of the stacked matrices (N, r, c) and their numerical ranks (N,), from
+    one SVD each, with the rank policy of :func:`kronlag.tolerances.numerical_rank`."""
+    n, rows, columns = matrices.shape
+    if rows == 0 or columns == 0:
+        return np.zeros((n, columns, rows)), np.zeros(n, dtype=int)
+    U, S, Vt = np.linalg.svd(matrices, full_matrices=False)
+    ranks = np.array([numerical_rank(values, rank_rtol) for values in S], dtype=int)
+    kept = np.arange(S.shape[1]) < ranks[:, None]  # the singular values come sorted, largest first
+    inverse = np.where(kept, 1.0 / np.where(kept, S, 1.0), 0.0)
+    return (np.swapaxes(Vt, 1, 2) * inverse[:, None, :]) @ np.swapaxes(U, 1, 2), ranks
+
+
 def velocity_constraints(terms: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """``B = [Phi_q; A]`` (r + s, m) and ``c = [Phi_t; b]`` (r + s,) from :func:`split_terms` of
     one state: the velocity constraints of both kinds are ``B qd + c = 0``."""
@@ -771,33 +784,30 @@ class NumericModel:
         selection = np.zeros((n, self.m, len(columns)))
         selection[:, columns, range(len(columns))] = 1.0
         # null-space projector of G: P = I - G^+ G, so that P G^T = 0
-        G_pinv = np.linalg.pinv(G, rcond=self.rank_rtol) if G.shape[1] else np.zeros((n, self.m, 0))
+        G_pinv, G_ranks = _pseudo_inverses(G, self.rank_rtol)
         projector = np.eye(self.m) - G_pinv @ G
         reduced = projector @ selection
-        forces = np.einsum("nij,nj->ni", np.linalg.pinv(reduced, rcond=self.rank_rtol),
-                           np.einsum("nij,nj->ni", projector, rhs)) if columns else np.zeros((n, 0))
+        reduced_pinv, reduced_ranks = _pseudo_inverses(reduced, self.rank_rtol)
+        forces = np.einsum("nij,nj->ni", reduced_pinv, np.einsum("nij,nj->ni", projector, rhs))
         excess = np.einsum("nij,nj->ni", selection, forces) - rhs
         multipliers = np.einsum("nji,nj->ni", G_pinv, excess)  # (G^T)^+ = (G^+)^T
         residual = np.linalg.norm(excess - np.einsum("nji,nj->ni", G, multipliers), axis=1)
         scale = np.maximum.reduce([np.linalg.norm(rhs, axis=1), np.linalg.norm(inertial, axis=1),
                                    np.linalg.norm(terms["h"], axis=1), np.full(n, 1e-300)])
         violated = np.flatnonzero(residual > rtol * scale)
-        degrees = [self.m - numerical_rank(np.linalg.svd(g, compute_uv=False), self.rank_rtol) for g in G[:1]]
+        degrees = self.m - G_ranks[0] if n else 0
         if len(violated):
             i = violated[0]
-            shortage = (f"; {len(columns)} actuator(s) for {degrees[0]} degree(s) of freedom"
-                        if degrees and len(columns) < degrees[0] else "")
+            shortage = f"; {len(columns)} actuator(s) for {degrees} degree(s) of freedom" if len(columns) < degrees else ""
             raise ValueError(f"the actuators {list(actuated)} cannot produce this motion at t = {t[i]:g} "
                              f"(and {len(violated) - 1} other times): the equations of motion are violated "
                              f"by {residual[i]:.3g} (relative {residual[i] / scale[i]:.3g}){shortage}")
-        independent = [numerical_rank(np.linalg.svd(x, compute_uv=False), self.rank_rtol) for x in reduced]
-        forces_unique = all(rank == len(columns) for rank in independent)
-        if not forces_unique and n:
-            warnings.warn(f"{len(columns)} actuators {list(actuated)} for {degrees[0]} degree(s) of freedom: "
+        forces_unique = bool(np.all(reduced_ranks == len(columns)))
+        if not forces_unique:
+            warnings.warn(f"{len(columns)} actuators {list(actuated)} for {degrees} degree(s) of freedom: "
                           "over-actuated, the forces returned are the minimum-norm split", ActuationWarning,
                           stacklevel=3)
-        multipliers_unique = all(numerical_rank(np.linalg.svd(g, compute_uv=False), self.rank_rtol) == g.shape[0]
-                                 for g in G)
+        multipliers_unique = bool(np.all(G_ranks == G.shape[1]))
         lam = np.zeros((n, self.r))
         lam[:, rows] = multipliers[:, :len(rows)]
         return InverseDynamicsResult(forces, lam, multipliers[:, len(rows):], forces_unique and multipliers_unique)

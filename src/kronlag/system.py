@@ -42,6 +42,7 @@ __all__ = [
     "Damper",
     "DrawingLine",
     "System",
+    "drive_name",
 ]
 
 #: The time symbol; allowed in applied forces and torques and in constraints (drives).
@@ -452,6 +453,11 @@ def _check_name(name, what: str) -> str:
     return name
 
 
+def drive_name(target) -> str:
+    """The default name of the drive of ``target`` (:meth:`System.add_drive`): ``"drive <target>"``."""
+    return f"drive {target}"
+
+
 class System:
     """A constrained multibody system described with redundant coordinates.
 
@@ -681,7 +687,7 @@ class System:
         target = _scalar(target, what)
         motion = _scalar(motion, f"{what} motion")
         self._check_symbols(motion, f"{what} motion", allow_q=False, allow_t=True)
-        name = name or f"drive {target}"
+        name = name or drive_name(target)
         self.add_constraint(target - motion, name=name)
         self.drives.append(name)
         return name

@@ -12,7 +12,6 @@ import copy
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -23,7 +22,7 @@ from .drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_
 from .equations import Equations
 from .expressions import parse_expression
 from .modelfile import ModelFile, PrescribedMotion
-from .system import ModelError, t
+from .system import ModelError, drive_name, t
 
 if TYPE_CHECKING:
     from .numeric import NumericModel
@@ -303,7 +302,7 @@ def parse_drive(text: str, model: ModelFile) -> tuple[str, PrescribedMotion]:
                          f"{', '.join(coordinates)}")
     symbols = {p.name: p for p in model.system.parameters} | {"t": t}
     motion = parse_expression(expression, symbols, what=f"drive {name}")
-    return f"drive {name}", PrescribedMotion(coordinates[name], motion)
+    return drive_name(coordinates[name]), PrescribedMotion(coordinates[name], motion)
 
 
 def driven_model(model: ModelFile, drives: Mapping[str, PrescribedMotion]) -> NumericModel:
