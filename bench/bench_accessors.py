@@ -111,7 +111,7 @@ def main() -> None:
         return
     print(f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, "
           f"numpy {np.__version__}, kronlag call layer: "
-          f"{'kronlag._call' if kronlag.codegen.FAST_CALL else 'ctypes (kronlag._call not built)'}")
+          f"{'kronlag.numeric.codegen._call' if kronlag.numeric.codegen.FAST_CALL else 'ctypes (kronlag.numeric.codegen._call not built)'}")
     values, model, q, qd = state()
     reference, version = pinocchio_times(values, model, q, qd)
     columns = {"kronlag": kronlag_times()}

@@ -62,7 +62,7 @@ def measure(n: int, angles: str, compare_cse: bool) -> dict:
     phases["derivation"] = time.perf_counter() - start
     start = time.perf_counter()
     source = codegen.KernelSource(eom)
-    for block, _, _ in codegen.LAYOUTS["dynamics"]:
+    for block in codegen.LAYOUTS["dynamics"]:
         source.matrix(block)
     phases["conversion"] = time.perf_counter() - start
     start = time.perf_counter()

@@ -51,7 +51,6 @@ import numpy as np
 import kronlag
 from kronlag import models
 
-
 #: Smoke-test mode (``--quick``): far fewer timed calls.
 QUICK = False
 #: The Python backend is timed (and checked against C) up to this many links only: beyond, its

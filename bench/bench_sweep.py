@@ -41,13 +41,13 @@ import time
 import numpy as np
 
 import kronlag
-from kronlag.modelfile import load_example
+from kronlag.model.builtin import load_example
 
 
 def cases_of(count: int) -> list[dict[str, float]]:
     speeds = max(1, round(math.sqrt(count)))
     torques = math.ceil(count / speeds)
-    return kronlag.sweeps.grid(tau=np.linspace(-2.0, 2.0, torques), q1d=np.linspace(0.5, 8.0, speeds))[:count]
+    return kronlag.studies.sweeps.grid(tau=np.linspace(-2.0, 2.0, torques), q1d=np.linspace(0.5, 8.0, speeds))[:count]
 
 
 def rebuild_per_case(cases, t_end: float, t_eval) -> list[float]:

@@ -4,8 +4,8 @@ Simulates the shipped model file and writes ``double_pendulum.png``.
 Run: ``python3 examples/double_pendulum.py``.
 """
 
-from kronlag.modelfile import load_example
-from kronlag.workflows import simulate_model
+from kronlag.app.workflows import simulate_model
+from kronlag.model.builtin import load_example
 
 trajectory = simulate_model(load_example("double_pendulum"))
 print(trajectory.message)

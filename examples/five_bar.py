@@ -19,8 +19,8 @@ import numpy as np
 import sympy as sp
 
 import kronlag
-from kronlag.modelfile import load_example
-from kronlag.reactions import joint_reaction
+from kronlag.model.builtin import load_example
+from kronlag.numeric.reactions import joint_reaction
 
 robot = load_example("five_bar")
 values = robot.numeric_values()

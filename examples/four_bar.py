@@ -6,8 +6,8 @@ model file and writes ``four_bar.png`` (q, qd, lambda, energy, drift) and
 """
 
 import kronlag
-from kronlag.modelfile import load_example
-from kronlag.workflows import simulate_model, summarize
+from kronlag.app.workflows import simulate_model, summarize
+from kronlag.model.builtin import load_example
 
 equations = kronlag.derive(kronlag.models.four_bar()).simplify()
 for name in ("M", "C", "g", "Phi_q"):

@@ -4,8 +4,8 @@ Simulates the shipped model file and writes ``heavy_top.png``.
 Run: ``python3 examples/heavy_top.py``.
 """
 
-from kronlag.modelfile import load_example
-from kronlag.workflows import simulate_model
+from kronlag.app.workflows import simulate_model
+from kronlag.model.builtin import load_example
 
 trajectory = simulate_model(load_example("heavy_top"))
 print(trajectory.message)

@@ -4,8 +4,8 @@ Simulates the shipped model file and writes ``quick_return.png``.
 Run: ``python3 examples/quick_return.py``.
 """
 
-from kronlag.modelfile import load_example
-from kronlag.workflows import simulate_model
+from kronlag.app.workflows import simulate_model
+from kronlag.model.builtin import load_example
 
 trajectory = simulate_model(load_example("quick_return"))
 print(trajectory.message)

@@ -16,7 +16,7 @@ import sympy as sp
 
 import kronlag
 from kronlag import frames
-from kronlag.joints import free_body, mechanism
+from kronlag.model.free_bodies import free_body, mechanism
 
 a, b, c, m1, m2, m3, g = sp.symbols("a b c m1 m2 m3 g")
 values = dict(a=0.1, b=0.31, c=0.3, m1=0.5, m2=0.8, m3=0.6, g=9.81)  # m, kg, m/s^2

@@ -4,8 +4,8 @@ Simulates the shipped model file and writes ``slider_crank.png``.
 Run: ``python3 examples/slider_crank.py``.
 """
 
-from kronlag.modelfile import load_example
-from kronlag.workflows import simulate_model
+from kronlag.app.workflows import simulate_model
+from kronlag.model.builtin import load_example
 
 trajectory = simulate_model(load_example("slider_crank"))
 print(trajectory.message)

@@ -15,8 +15,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import kronlag
-from kronlag.modelfile import load_example
-from kronlag.reactions import joint_reaction
+from kronlag.model.builtin import load_example
+from kronlag.numeric.reactions import joint_reaction
 
 engine = load_example("slider_crank_engine")
 omega = 1500 * 2 * np.pi / 60  # rad/s

@@ -14,7 +14,7 @@ import sympy as sp
 import sympy.physics.mechanics as me
 
 import kronlag
-from kronlag.analysis import EquilibriumError
+from kronlag.core.errors import EquilibriumError
 
 GRAVITY, LENGTH, MASS = 9.81, 0.5, 1.0
 FOUR_BAR = dict(l1=0.2, l2=0.6, l3=0.5, l4=0.5, m1=1.0, m2=2.0, m3=3.0, g=9.81, tau=0.0)
@@ -218,7 +218,7 @@ def test_mode_animation_stays_on_the_constraint_manifold(four_bar, tmp_path):
 
 
 def test_cli_equilibrium_prints_the_hanging_state_and_its_frequency(capsys):
-    from kronlag.cli import main
+    from kronlag.app.cli import main
 
     status = main(["equilibrium", "four_bar", "--guess", "q1=-1.5", "--guess", "q2=-0.5", "--guess", "q3=-1.5",
                    "--modes"])
@@ -239,7 +239,7 @@ def test_cli_equilibrium_prints_the_hanging_state_and_its_frequency(capsys):
 def test_symbolic_linearization_of_a_cartesian_pendulum_matches_the_hand_reduction():
     """One mass on a rod, coordinates x, y, x independent: y = -sqrt(l^2 - x^2) below the pivot,
     so M_r = m (1 + x^2 / y^2) and, at rest (x = 0, lambda = m g / (2 l)), K_r = m g / l."""
-    from kronlag.analysis import symbolic_linearization
+    from kronlag.studies.linearization import symbolic_linearization
 
     x, y = kronlag.coordinates("x y")
     m, l, g = sp.symbols("m l g", positive=True)
@@ -257,7 +257,7 @@ def test_symbolic_linearization_of_a_cartesian_pendulum_matches_the_hand_reducti
 
 
 def test_symbolic_linearization_of_the_four_bar_agrees_with_the_numeric_one(four_bar):
-    from kronlag.analysis import symbolic_linearization
+    from kronlag.studies.linearization import symbolic_linearization
 
     equations = four_bar.equations
     reduced = symbolic_linearization(equations, ["q1"])
@@ -310,7 +310,7 @@ def test_damping_ratio_of_a_damped_oscillator_on_an_inclined_line():
 
 @pytest.mark.slow
 def test_cli_animates_a_mode(tmp_path, capsys):
-    from kronlag.cli import main
+    from kronlag.app.cli import main
 
     hanging = ["--guess", "q1=-1.5", "--guess", "q2=-0.5", "--guess", "q3=-1.5"]
     assert main(["equilibrium", "four_bar", *hanging, "--animate-mode", str(tmp_path / "mode.txt")]) == 2

@@ -10,12 +10,12 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from helpers import FOUR_BAR_PARAMETERS, four_bar_joints, four_bar_trajectory, heavy_top_trajectory
 from PIL import Image, ImageSequence
-from synthetic_trajectories import FOUR_BAR_PARAMETERS, four_bar_joints, four_bar_trajectory, heavy_top_trajectory
 
 import kronlag
-from kronlag import animation
-from kronlag.animation import _evaluate_drawing, _Picture, _resample, animate, render_frame
+from kronlag.views import animation
+from kronlag.views.animation import _evaluate_drawing, _Picture, _resample, animate, render_frame
 
 CRANK_SPEED = 2 * np.pi
 LINK_COLOR = np.array([31, 119, 180])  # matplotlib's C0, the colour of the first drawing line

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import derived
+from helpers import derived
 
-from kronlag import codegen
-from kronlag.numeric import BATCH_MATRICES
+from kronlag.numeric import BATCH_MATRICES, codegen
 
 needs_compiler = pytest.mark.skipif(codegen.c_compiler() is None, reason="no C compiler")
 BACKENDS = [pytest.param("c", marks=needs_compiler), "python"]

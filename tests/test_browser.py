@@ -11,10 +11,10 @@ import subprocess
 
 import numpy as np
 import pytest
+from helpers import four_bar_joints, four_bar_trajectory
 from PIL import Image
-from synthetic_trajectories import four_bar_joints, four_bar_trajectory
 
-from kronlag.animation import _evaluate_drawing, _Picture, animate
+from kronlag.views.animation import _evaluate_drawing, _Picture, animate
 
 CHROMIUM = next(filter(None, map(shutil.which, ("chromium", "chromium-browser", "google-chrome"))), None)
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed")]

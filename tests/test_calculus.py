@@ -6,10 +6,10 @@ import random
 
 import pytest
 import sympy as sp
+from helpers import assert_numerically_equal, derived, state_symbols
 from sympy.physics.mechanics import dynamicsymbols
 
-from conftest import assert_numerically_equal, derived, state_symbols
-from kronlag.calculus import kron, matrix_derivative, product_derivative, time_derivative
+from kronlag.symbolic.calculus import kron, matrix_derivative, product_derivative, time_derivative
 
 PARAMETER = sp.Symbol("p")
 

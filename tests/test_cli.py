@@ -1,4 +1,4 @@
-"""The command line, end to end through ``kronlag.cli.main`` (and once as a process):
+"""The command line, end to end through ``kronlag.app.cli.main`` (and once as a process):
 outputs, files written, and exit codes 0 (ok), 2 (bad input, before any work), 1 (the run did not
 complete: a numerical failure or an output that could not be written)."""
 
@@ -15,11 +15,13 @@ import numpy as np
 import pytest
 from PIL import Image, ImageSequence
 
-from kronlag import animation, cli
-from kronlag.cli import ProgressBar, build_parser, main
-from kronlag.modelfile import example_names, example_path, resolve_model
-from kronlag.trajectory import Trajectory
-from kronlag.workflows import model_units
+from kronlag.app import commands
+from kronlag.app.cli import build_parser, main
+from kronlag.app.commands import ProgressBar
+from kronlag.app.workflows import model_units
+from kronlag.model.builtin import example_names, example_path, resolve_model
+from kronlag.simulation.trajectory import Trajectory
+from kronlag.views import animation
 
 COMMANDS = ["models", "derive", "export", "check", "simulate", "inverse"]
 
@@ -245,12 +247,12 @@ def test_parser_has_a_command_per_task():
 
 @pytest.mark.slow
 def test_runs_as_a_program(tmp_path):
-    good = subprocess.run([sys.executable, "-m", "kronlag.cli", "check", "slider_crank"], capture_output=True,
+    good = subprocess.run([sys.executable, "-m", "kronlag", "check", "slider_crank"], capture_output=True,
                           text=True, timeout=1800)
     assert good.returncode == 0, good.stderr
     assert "degrees of freedom m - r - s = 1" in good.stdout
     bad = write_model(tmp_path, "coordinates = 'q1'")
-    failed = subprocess.run([sys.executable, "-m", "kronlag.cli", "derive", str(bad)], capture_output=True,
+    failed = subprocess.run([sys.executable, "-m", "kronlag", "derive", str(bad)], capture_output=True,
                             text=True, timeout=1800)
     assert failed.returncode == 2
     assert failed.stderr == f"kronlag: error: {bad}: coordinates: expected a non-empty list of names, " \
@@ -296,12 +298,12 @@ def no_simulation(monkeypatch):
     """Fail the test if the CLI starts simulating."""
     def refuse(*args, **kwargs):
         raise AssertionError("simulated although an output option was bad")
-    monkeypatch.setattr(cli, "simulate_model", refuse)
+    monkeypatch.setattr(commands, "simulate_model", refuse)
 
 
 def without_module(monkeypatch, missing: str):
-    find_spec = cli.importlib.util.find_spec
-    monkeypatch.setattr(cli.importlib.util, "find_spec", lambda name: None if name == missing else find_spec(name))
+    find_spec = commands.importlib.util.find_spec
+    monkeypatch.setattr(commands.importlib.util, "find_spec", lambda name: None if name == missing else find_spec(name))
 
 
 @pytest.mark.parametrize("argv, message, setup", [
@@ -390,9 +392,9 @@ def test_output_grid(capsys, tmp_path, options, times):
 
 
 def test_default_grid_is_bounded_for_long_runs():
-    assert cli._default_points(3.0) == 1001
-    assert cli._default_points(50.0) == 5001  # a point every 0.01 s
-    assert cli._default_points(1e4) == 100_001  # 10^4 s in bounded memory
+    assert commands._default_points(3.0) == 1001
+    assert commands._default_points(50.0) == 5001  # a point every 0.01 s
+    assert commands._default_points(1e4) == 100_001  # 10^4 s in bounded memory
 
 
 def test_dt_and_points_exclude_each_other(capsys, no_simulation):

@@ -4,7 +4,8 @@ import pytest
 import symengine as se
 import sympy as sp
 
-from kronlag import derivation, models
+from kronlag import models
+from kronlag.symbolic import derivation
 
 
 def _systems():

@@ -203,7 +203,7 @@ def test_a_partly_driven_double_pendulum_swings_like_the_reduced_equation():
 
 def test_kinematics_of_named_points():
     """The engine's wrist point follows the closed-form piston position x(theta)."""
-    engine = kronlag.modelfile.load_example("slider_crank_engine")
+    engine = kronlag.model.builtin.load_example("slider_crank_engine")
     engine.system.add_drive("theta_crank", 20 * T)
     model = kronlag.derive(engine.system).numeric(engine.numeric_values())
     times = np.linspace(0, 0.3, 31)
@@ -220,7 +220,7 @@ def test_kinematics_of_named_points():
 
 
 def test_cli_kinematics_command(tmp_path, capsys):
-    from kronlag.cli import main
+    from kronlag.app.cli import main
 
     target = tmp_path / "kinematics.csv"
     assert main(["kinematics", "slider_crank", "--drive", "q1=0.5 + 3*t", "--t-end", "0.5", "--points", "6",
@@ -256,7 +256,7 @@ q = {x = 0.0, y = -0.5}
 """
     path = tmp_path / "driven.toml"
     path.write_text(text)
-    from kronlag.workflows import simulate_model
+    from kronlag.app.workflows import simulate_model
 
     model = kronlag.load_model(path)
     with warnings.catch_warnings():
@@ -268,7 +268,9 @@ q = {x = 0.0, y = -0.5}
 
 
 def test_equilibrium_and_linearization_refuse_moving_drives(crank_driven):
-    from kronlag.analysis import EquilibriumError, equilibrium, linearize
+    from kronlag.core.errors import EquilibriumError
+    from kronlag.studies.equilibrium import equilibrium
+    from kronlag.studies.linearization import linearize
 
     model, _ = crank_driven
     with pytest.raises(EquilibriumError, match="drives move there"):
@@ -291,7 +293,7 @@ motion = "0.35 + 0.05*sin(2*pi*t)"
 
 
 def five_bar_circle_file(tmp_path):
-    from kronlag.modelfile import example_path
+    from kronlag.model.builtin import example_path
 
     text = example_path("five_bar").read_text()
     text = text[:text.index("[[drives]]")] + FIVE_BAR_CIRCLE
@@ -303,8 +305,8 @@ def five_bar_circle_file(tmp_path):
 def test_five_bar_driven_at_its_end_effector_reports_the_motor_torques(tmp_path, capsys):
     """The motor power tau1 theta1d + tau2 theta2d equals the rate of the total energy
     (no other force does work), along the circle that the end-effector drives prescribe."""
-    from kronlag.cli import main
-    from kronlag.workflows import inverse_dynamics_along
+    from kronlag.app.cli import main
+    from kronlag.app.workflows import inverse_dynamics_along
 
     path = five_bar_circle_file(tmp_path)
     robot = kronlag.load_model(path)
@@ -349,7 +351,7 @@ def test_a_time_dependent_velocity_constraint():
 def test_motions_that_stop_for_an_instant_pass_the_constraint_checks(capsys):
     """The five-bar file's drives swing both arms (speed zero at t = 0.25, 0.75); a state at rest
     computed with rounding is consistent too."""
-    from kronlag.cli import main
+    from kronlag.app.cli import main
 
     assert main(["inverse", "five_bar", "--points", "5"]) == 0
     assert "max |force|: theta1" in capsys.readouterr().out

@@ -8,8 +8,7 @@ import warnings
 import numpy as np
 import pytest
 import sympy as sp
-from conftest import derived
-from test_numeric import backend_params, numeric, parameter_values, random_state
+from helpers import backend_params, derived, numeric, parameter_values, random_state
 
 import kronlag
 from kronlag import models

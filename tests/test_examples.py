@@ -17,6 +17,6 @@ def test_example_script_writes_its_plot(script, tmp_path, monkeypatch):
 
 
 def test_there_is_a_script_per_shipped_model():
-    from kronlag.modelfile import example_names
+    from kronlag.model.builtin import example_names
 
     assert set(example_names()) <= {path.stem for path in EXAMPLES}

@@ -13,9 +13,9 @@ import subprocess
 import numpy as np
 import pytest
 import sympy as sp
-from conftest import derived, evaluate
+from helpers import derived, evaluate
 
-from kronlag.export import EXPORTED, LANGUAGES, export_code, exported_matrices, format_equations
+from kronlag.symbolic.export import EXPORTED, LANGUAGES, export_code, exported_matrices, format_equations
 
 MODELS = ["four_bar", "heavy_top", "chaplygin_sleigh", "quick_return"]
 

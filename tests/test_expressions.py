@@ -14,15 +14,8 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from kronlag import ModelError
-from kronlag.expressions import (
-    FUNCTIONS,
-    MAX_DEPTH,
-    MAX_EXPONENT,
-    MAX_LENGTH,
-    MAX_NODES,
-    ExpressionError,
-    parse_expression,
-)
+from kronlag.core.errors import ExpressionError
+from kronlag.model.expressions import FUNCTIONS, MAX_DEPTH, MAX_EXPONENT, MAX_LENGTH, MAX_NODES, parse_expression
 
 x, y, l1 = sp.symbols("x y l1")
 SYMBOLS = {"x": x, "y": y, "l1": l1}

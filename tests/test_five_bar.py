@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import kronlag
-from kronlag.modelfile import load_example
+from kronlag.model.builtin import load_example
 
 VALUES = load_example("five_bar").numeric_values()
 D, L1, L2, M1, M2, I1, I2, G = (VALUES[name] for name in ("d", "l1", "l2", "m1", "m2", "I1", "I2", "g"))
@@ -144,7 +144,7 @@ def test_distal_link_is_in_equilibrium_under_its_joint_forces_and_weight(model):
     zero = np.zeros(model.m)
     lam = model.inverse_dynamics(q, zero, zero, actuated=ACTUATED).lam
     system = model.equations.system
-    from kronlag.reactions import joint_reaction
+    from kronlag.numeric.reactions import joint_reaction
 
     elbow, tip = (joint_reaction(model, name, [0.0], q[None], lam[None]) for name in ("elbow_2", "tip"))
     assert [joint.body_b for joint in system.joints if joint.name in ("elbow_2", "tip")] == ["distal_2"] * 2

@@ -4,8 +4,7 @@ the misprints corrected as in docs/method.md) and the quick-return mechanism
 
 import pytest
 import sympy as sp
-
-from conftest import derived, is_zero
+from helpers import derived, is_zero
 
 cos, sin = sp.cos, sp.sin
 

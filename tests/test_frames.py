@@ -4,13 +4,12 @@ sympy.physics.vector orientations, direct differentiation in time, finite differ
 import numpy as np
 import pytest
 import sympy as sp
+from helpers import assert_numerically_equal
 from sympy.physics.mechanics import ReferenceFrame, dynamicsymbols
 
 import kronlag
 from kronlag import frames
-from kronlag.system import ModelError
-
-from conftest import assert_numerically_equal
+from kronlag.core.errors import ModelError
 
 a, b, c = sp.symbols("a b c")
 

@@ -11,7 +11,7 @@ import random
 import numpy as np
 import pytest
 import sympy as sp
-from conftest import (
+from helpers import (
     MODEL_BUILDERS,
     assert_numerically_equal,
     derived,
@@ -20,7 +20,7 @@ from conftest import (
     state_symbols,
 )
 
-from kronlag.calculus import time_derivative
+from kronlag.symbolic.calculus import time_derivative
 
 MODELS = list(MODEL_BUILDERS)
 

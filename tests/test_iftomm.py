@@ -21,7 +21,8 @@ import pytest
 import kronlag
 from kronlag import models
 from kronlag.benchmarks import iftomm
-from kronlag.modelfile import example_path, load_model
+from kronlag.model.builtin import example_path
+from kronlag.model.modelfile.reader import load_model
 from kronlag.simulation import METHODS
 
 CODES = list(iftomm.BENCHMARKS)

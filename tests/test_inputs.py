@@ -9,9 +9,13 @@ import sympy as sp
 
 import kronlag
 from kronlag import ModelError, PlanarBody, PointMass, RigidBody, RotationSequence, System, models
-from kronlag.expressions import MAX_DEPTH, ExpressionError, parse_expression
-from kronlag.modelfile import example_path, load_model, loads_model, to_toml
-from kronlag.system import MAX_ROTATION_FACTORS, check_parameter_values
+from kronlag.core.errors import ExpressionError
+from kronlag.model.bodies import check_parameter_values
+from kronlag.model.builtin import example_path
+from kronlag.model.expressions import MAX_DEPTH, parse_expression
+from kronlag.model.modelfile.reader import load_model, loads_model
+from kronlag.model.modelfile.writer import to_toml
+from kronlag.model.rotations import MAX_ROTATION_FACTORS
 
 a, b, l, m = sp.symbols("a b l m")
 c, s = sp.cos(a), sp.sin(a)
@@ -126,7 +130,7 @@ def test_physical_bodies_pass():
 
 def test_every_builtin_model_is_physical_with_its_file_values():
     for name in models.BUILTIN_MODELS:
-        model = kronlag.modelfile.load_example(name)
+        model = kronlag.model.builtin.load_example(name)
         check_parameter_values(model.system, model.numeric_values())
 
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import derived
+from helpers import derived
 
-from kronlag.interop import MATRICES, casadi_functions, jax_functions
+from kronlag.symbolic.interop import MATRICES, casadi_functions, jax_functions
 
 MODELS = ["four_bar", "chaplygin_sleigh", "quick_return"]
 

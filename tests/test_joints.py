@@ -2,24 +2,21 @@
 spatial joint allows, the paper's four-bar and quick-return written as bodies + joints,
 and single joints against sympy.physics.mechanics PinJoint, PrismaticJoint, SphericalJoint."""
 
-import functools
 
 import numpy as np
 import pytest
 import sympy as sp
+from helpers import four_bar_by_joints, quick_return_by_joints
+from helpers import numeric_by_joints as numeric
 from sympy.physics import mechanics as me
 
 import kronlag
-from kronlag.frames import euler_sequence
-from kronlag.joints import free_body, mechanism
-from kronlag.system import ModelError
+from kronlag.core.errors import ModelError
+from kronlag.model.free_bodies import free_body, mechanism
+from kronlag.model.rotations import euler_sequence
 
 cos, sin = sp.cos, sp.sin
 
-FOUR_BAR_VALUES = dict(l1=0.2, l2=0.6, l3=0.5, l4=0.5, m1=1, m2=3, m3=2.5, I1=0.0033, I2=0.09, I3=0.052,
-                       g=9.81, tau=0.7)
-QUICK_RETURN_VALUES = dict(l_BC=0.2, l_AB=0.3, l_AE=0.8, l_EF=0.3, l_AH=0.75, m1=1.0, m2=2.5, m3=0.8, m4=0.3,
-                           m5=0.6, I1=0.004, I2=0.15, I3=0.006, g=9.81, tau=0.5)
 
 
 def two_planar_bodies():
@@ -99,44 +96,6 @@ def test_joint_closing_a_loop_of_joint_angle_coordinates_is_eq_24():
 
 
 # -- whole mechanisms as bodies + joints ---------------------------------------------------------
-
-
-def four_bar_by_joints():
-    l1, l2, l3, l4, m1, m2, m3, I1, I2, I3, g, tau = sp.symbols("l1 l2 l3 l4 m1 m2 m3 I1 I2 I3 g tau")
-    bodies = [free_body("crank", mass=m1, inertia=I1), free_body("coupler", mass=m2, inertia=I2),
-              free_body("follower", mass=m3, inertia=I3)]
-    system = mechanism(bodies, parameters=[l1, l2, l3, l4, m1, m2, m3, I1, I2, I3, g, tau], gravity=(0, -g),
-                       name="four_bar_by_joints")
-    system.add_joint("revolute", "ground", "crank", at_b=(-l1 / 2, 0))
-    system.add_joint("revolute", "crank", "coupler", at_a=(l1 / 2, 0), at_b=(-l2 / 2, 0))
-    system.add_joint("revolute", "coupler", "follower", at_a=(l2 / 2, 0), at_b=(l3 / 2, 0))
-    system.add_joint("revolute", "ground", "follower", at_a=(l4, 0), at_b=(-l3 / 2, 0))
-    system.add_torque("crank", tau, name="drive")
-    return system
-
-
-def quick_return_by_joints():
-    l_BC, l_AB, l_AE, l_EF, l_AH = sp.symbols("l_BC l_AB l_AE l_EF l_AH")
-    m1, m2, m3, m4, m5, I1, I2, I3, g, tau = sp.symbols("m1 m2 m3 m4 m5 I1 I2 I3 g tau")
-    bodies = [free_body("crank", mass=m1, inertia=I1), free_body("rocker", mass=m2, inertia=I2),
-              free_body("link", mass=m3, inertia=I3), free_body("D", mass=m4), free_body("G", mass=m5)]
-    system = mechanism(bodies, parameters=[l_BC, l_AB, l_AE, l_EF, l_AH, m1, m2, m3, m4, m5, I1, I2, I3, g, tau],
-                       gravity=(0, -g), name="quick_return_by_joints")
-    system.add_joint("revolute", "ground", "crank", at_a=(0, l_AB), at_b=(-l_BC / 2, 0))
-    system.add_joint("revolute", "crank", "D", at_a=(l_BC / 2, 0))
-    system.add_joint("pin_in_slot", "rocker", "D", axis=(1, 0))
-    system.add_joint("revolute", "ground", "rocker", at_b=(-l_AE / 2, 0))
-    system.add_joint("revolute", "rocker", "link", at_a=(l_AE / 2, 0), at_b=(-l_EF / 2, 0))
-    system.add_joint("revolute", "link", "G", at_a=(l_EF / 2, 0))
-    system.add_joint("pin_in_slot", "ground", "G", at_a=(0, l_AH), axis=(1, 0))
-    system.add_torque("crank", tau, name="drive")
-    return system
-
-
-@functools.cache
-def numeric(builder, values_name):
-    values = {"four_bar": FOUR_BAR_VALUES, "quick_return": QUICK_RETURN_VALUES}[values_name]
-    return kronlag.derive(builder()).numeric(values, backend="numpy")
 
 
 def matching_state(model, angles, rates, angle_names):

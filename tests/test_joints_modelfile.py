@@ -6,9 +6,12 @@ import pytest
 import sympy as sp
 
 import kronlag
-from kronlag.modelfile import ModelFileError, example_path, loads_model, to_toml
-from kronlag.reactions import joint_reaction
-from kronlag.workflows import driven_model, inverse_dynamics_along, parse_drive
+from kronlag.app.workflows import driven_model, inverse_dynamics_along, parse_drive
+from kronlag.core.errors import ModelFileError
+from kronlag.model.builtin import example_path
+from kronlag.model.modelfile.reader import loads_model
+from kronlag.model.modelfile.writer import to_toml
+from kronlag.numeric.reactions import joint_reaction
 
 ENGINE = example_path("slider_crank_engine")
 

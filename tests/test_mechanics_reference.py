@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import pytest
 import sympy as sp
+from helpers import assert_numerically_equal, derived, state_symbols
 from sympy.physics.mechanics import (
     LagrangesMethod,
     Lagrangian,
@@ -26,8 +27,6 @@ from sympy.physics.mechanics import (
     dynamicsymbols,
     inertia,
 )
-
-from conftest import assert_numerically_equal, derived, state_symbols
 
 t = dynamicsymbols._t
 

@@ -8,21 +8,15 @@ import re
 import numpy as np
 import pytest
 import sympy as sp
-from conftest import assert_numerically_equal, derived, state_symbols
+from helpers import assert_numerically_equal, derived, state_symbols
 
 import kronlag
 from kronlag import models
-from kronlag.modelfile import (
-    ModelFile,
-    ModelFileError,
-    example_names,
-    example_path,
-    load_example,
-    load_model,
-    loads_model,
-    resolve_model,
-    to_toml,
-)
+from kronlag.core.errors import ModelFileError
+from kronlag.model.builtin import example_names, example_path, load_example, resolve_model
+from kronlag.model.modelfile.model_file import ModelFile
+from kronlag.model.modelfile.reader import load_model, loads_model
+from kronlag.model.modelfile.writer import to_toml
 
 #: Example file -> the conftest name of its Python model.
 EXAMPLES = {

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import ctypes
-import functools
-import random
 import subprocess
 import sys
 from pathlib import Path
@@ -12,44 +10,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sp
-from conftest import derived, evaluate, random_values
+from helpers import backend_params, derived, evaluate, needs_compiler, numeric, parameter_values, random_state
 
 import kronlag
-from kronlag import codegen
-from kronlag.calculus import time_derivative
+from kronlag.numeric import codegen
+from kronlag.numeric.codegen import c_backend
+from kronlag.symbolic.calculus import time_derivative
 
 MODELS = ["four_bar", "quick_return", "double_pendulum", "slider_crank", "heavy_top", "chaplygin_sleigh",
           "closed_chain_4_relative"]
-BACKENDS = ["python", "c"]
-
-needs_compiler = pytest.mark.skipif(codegen.c_compiler() is None, reason="no C compiler")
-
-
-def backend_params(backends=BACKENDS):
-    return [pytest.param(b, marks=needs_compiler) if b == "c" else b for b in backends]
-
-
-def parameter_values(name: str) -> dict[str, float]:
-    """Random values; a symmetric top's axial moment is capped at twice the transverse one
-    (the triangle inequality of principal moments, which NumericModel checks)."""
-    rng = random.Random(name)
-    values = {p.name: value for p, value in random_values(derived(name).parameters, rng).items()}
-    if {"Ixx", "Izz"} <= values.keys():
-        values["Izz"] = min(values["Izz"], 2 * values["Ixx"])
-    return values
-
-
-@functools.cache
-def numeric(name: str, backend: str) -> kronlag.NumericModel:
-    return derived(name).numeric(parameter_values(name), backend=backend)
-
-
-def random_state(eom: kronlag.Equations, seed: int) -> tuple[np.ndarray, np.ndarray, float]:
-    rng = np.random.default_rng(seed)
-    m = len(eom.coordinates)
-    return rng.uniform(-3, 3, m), rng.uniform(-3, 3, m), float(rng.uniform(0, 2))
-
-
 def sympy_reference(eom: kronlag.Equations, values: dict, q, qd, t) -> dict[str, np.ndarray]:
     """The matrices evaluated from the SymPy expressions (subs/evalf), independently of the codegen."""
     subs = {**{p: values[p.name] for p in eom.parameters}, **dict(zip(eom.coordinates, q)),
@@ -255,7 +224,7 @@ def test_bench_smoke(script, arguments, peer, expected):
 @needs_compiler
 def test_fast_call_layer_and_ctypes_fallback_agree(monkeypatch):
     fast = numeric("quick_return", "c")
-    monkeypatch.setattr(codegen, "FAST_CALL", None)
+    monkeypatch.setattr(c_backend, "FAST_CALL", None)
     fallback = derived("quick_return").numeric(parameter_values("quick_return"), backend="c")
     reference = numeric("quick_return", "python")
     q, qd, t = random_state(fast.equations, 6)
@@ -294,8 +263,8 @@ def test_C_and_C_christoffel_are_compiled_once_together(monkeypatch):
     values = parameter_values("four_bar")
     model = eom.numeric(values, backend="c")
     compiled = []
-    original = codegen.compile_shared_library
-    monkeypatch.setattr(codegen, "compile_shared_library",
+    original = c_backend.compile_shared_library
+    monkeypatch.setattr(c_backend, "compile_shared_library",
                         lambda source, **options: compiled.append(source) or original(source, **options))
     q, qd, t = random_state(eom, 5)
     C = model.C(q, qd, t)

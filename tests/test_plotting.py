@@ -6,11 +6,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from helpers import four_bar_trajectory, heavy_top_trajectory
 from PIL import Image
-from synthetic_trajectories import four_bar_trajectory, heavy_top_trajectory
 
-from kronlag.plotting import plot_inverse_dynamics, plot_trajectory
-from kronlag.workflows import InverseDynamicsRun
+import kronlag
+from kronlag.studies.drives import InverseDynamicsRun
+from kronlag.views.plotting import plot_inverse_dynamics, plot_trajectory
 
 CONSTRAINED_PANELS = ["Coordinates", "Velocities", "Lagrange multipliers", "Constraint drift", "Energy",
                       "Total-energy drift"]
@@ -65,7 +66,7 @@ def test_unconstrained_model_has_no_multiplier_or_drift_panels():
 
 
 def test_failed_run_and_exact_constraints_are_reported(four_bar):
-    failed = dataclasses.replace(four_bar, status=-1, message="step size too small",
+    failed = dataclasses.replace(four_bar, result=kronlag.Result.SOLVER_FAILED, message="step size too small",
                                  position_residual=np.zeros_like(four_bar.position_residual),
                                  velocity_residual=np.zeros_like(four_bar.velocity_residual))
     figure = plot_trajectory(failed)
@@ -123,7 +124,7 @@ def test_inverse_dynamics_figure():
 def engine():
     """The slider-crank engine (bodies + four named joints) over a few milliseconds."""
     import kronlag
-    from kronlag.modelfile import load_example
+    from kronlag.model.builtin import load_example
 
     engine = load_example("slider_crank_engine")
     model = kronlag.derive(engine.system).numeric(engine.numeric_values(), backend="python")
@@ -187,8 +188,8 @@ def test_inverse_dynamics_figure_shows_the_joint_forces():
 
 
 def test_kinematics_figure():
-    from kronlag.drives import Kinematics
-    from kronlag.plotting import plot_kinematics
+    from kronlag.studies.drives import Kinematics
+    from kronlag.views.plotting import plot_kinematics
 
     t = np.linspace(0.0, 1.0, 11)
     q = np.column_stack([t, 2 * t])

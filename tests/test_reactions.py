@@ -4,13 +4,13 @@ mechanism, and against the closed form of a compound pendulum."""
 import numpy as np
 import pytest
 import sympy as sp
+from helpers import FOUR_BAR_VALUES, QUICK_RETURN_VALUES, four_bar_by_joints, quick_return_by_joints
+from helpers import numeric_by_joints as numeric
 
 import kronlag
-from kronlag.calculus import time_derivative
-from kronlag.joints import free_body, mechanism
-from kronlag.reactions import joint_reaction
-
-from test_joints import FOUR_BAR_VALUES, QUICK_RETURN_VALUES, four_bar_by_joints, numeric, quick_return_by_joints
+from kronlag.model.free_bodies import free_body, mechanism
+from kronlag.numeric.reactions import joint_reaction
+from kronlag.symbolic.calculus import time_derivative
 
 
 def reactions_at(model, q, lam):

@@ -24,7 +24,7 @@ def equations():
 
 @pytest.fixture(scope="module", params=["numpy", "c"])
 def model(request, equations):
-    if request.param == "c" and not kronlag.codegen.c_compiler():
+    if request.param == "c" and not kronlag.numeric.codegen.c_compiler():
         pytest.skip("no C compiler")
     return equations.numeric(VALUES, backend=request.param)
 

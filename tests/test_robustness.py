@@ -12,12 +12,12 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import derived
+from helpers import derived
 
 import kronlag
 import kronlag.benchmarks.iftomm
+from kronlag.numeric.tolerances import APPROACH_RTOL, rank_magnitudes, singular_ratio
 from kronlag.simulation import METHODS, InitialStateWarning
-from kronlag.tolerances import APPROACH_RTOL, rank_magnitudes, singular_ratio
 
 FOUR_BAR = dict(l1=0.2, l2=0.6, l3=0.5, l4=0.5, m1=1.0, m2=2.0, m3=1.5, I1=0.2 ** 2 / 12, I2=2 * 0.6 ** 2 / 12,
                 I3=1.5 * 0.5 ** 2 / 12, g=9.81, tau=0.5)
@@ -150,7 +150,7 @@ def parallelogram():
     of rank 5 (the middle crank is redundant), one degree of freedom."""
     import sympy as sp
 
-    from kronlag.models import _bar
+    from kronlag.model.builtin.planar import _bar
 
     th = kronlag.coordinates("th0 th1 th2")
     x, y, phi = kronlag.coordinates("x y phi")

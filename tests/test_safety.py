@@ -16,11 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sp
-from conftest import derived
+from helpers import derived
 
 import kronlag
-from kronlag import codegen
-from kronlag.export import LANGUAGES, export_code, file_stem
+from kronlag.numeric import codegen
+from kronlag.numeric.codegen import c_backend
+from kronlag.symbolic.export import LANGUAGES, export_code, file_stem
 
 needs_compiler = pytest.mark.skipif(codegen.c_compiler() is None, reason="no C compiler")
 FOUR_BAR = dict(l1=1.0, l2=2.0, l3=2.0, l4=2.0, m1=1.0, m2=2.0, m3=2.0, I1=1 / 12, I2=2 / 3, I3=2 / 3, g=9.81,
@@ -167,9 +168,9 @@ def test_failing_compiler_falls_back_to_python_with_a_warning(tmp_path, monkeypa
                                        pytest.param(False, marks=needs_compiler)])
 def test_calls_from_four_threads_agree_with_serial_calls(fast_call, monkeypatch):
     if not fast_call:
-        monkeypatch.setattr(codegen, "FAST_CALL", None)
+        monkeypatch.setattr(c_backend, "FAST_CALL", None)
     elif codegen.FAST_CALL is None:
-        pytest.skip("kronlag._call is not built")
+        pytest.skip("kronlag.numeric.codegen._call is not built")
     model = derived("four_bar").numeric({**FOUR_BAR, "tau": lambda t: np.sin(t)}, backend="c")
     rng = np.random.default_rng(3)
     states = [(rng.uniform(-3, 3, 3), rng.uniform(-3, 3, 3), float(rng.uniform(0, 5))) for _ in range(200)]

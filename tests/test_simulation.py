@@ -21,7 +21,7 @@ import warnings
 import numpy as np
 import pytest
 import sympy as sp
-from conftest import derived
+from helpers import derived
 from scipy.integrate import solve_ivp
 
 import kronlag

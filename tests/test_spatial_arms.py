@@ -142,7 +142,7 @@ def test_sequence_jacobian_equals_vee_of_rotation_derivative(factors):
     sequence = RotationSequence([(axis, sp.sympify(angle, locals=symbols)) for axis, angle in factors])
     system = System(q)
     system.add_body(RigidBody("body", mass=1, inertia=sp.diag(1, 2, 3), position=(a, b, c), rotation=sequence))
-    from_axes = kronlag.derivation._rotation_jacobian(system.bodies[0], [kronlag.derivation.se.Symbol(s.name)
+    from_axes = kronlag.symbolic.derivation._rotation_jacobian(system.bodies[0], [kronlag.symbolic.derivation.se.Symbol(s.name)
                                                                          for s in q])
     rng = np.random.default_rng(11)
     for _ in range(3):
@@ -178,8 +178,8 @@ def test_large_matrix_rotation_derives_without_unbounded_simplification():
     rotation = RotationSequence([(axis, angle) for axis, angle in zip("zyyxzx", q)]).matrix
     system = System(q)
     system.add_body(RigidBody("tip", mass=1, inertia=sp.eye(3), position=(0, 0, 0), rotation=sp.Matrix(rotation)))
-    jacobian = kronlag.derivation._rotation_jacobian(system.bodies[0],
-                                                     [kronlag.derivation.se.Symbol(s.name) for s in q])
+    jacobian = kronlag.symbolic.derivation._rotation_jacobian(system.bodies[0],
+                                                     [kronlag.symbolic.derivation.se.Symbol(s.name) for s in q])
     point = dict(zip(q, np.random.default_rng(2).uniform(-2, 2, 6)))
     numeric = np.array(sp.Matrix(3, 6, [sp.sympify(e) for e in jacobian]).subs(point).evalf(), float)
     np.testing.assert_allclose(numeric, _vee_jacobian_numeric(sp.Matrix(rotation), list(q), point), atol=1e-12)
@@ -187,8 +187,8 @@ def test_large_matrix_rotation_derives_without_unbounded_simplification():
 
 def test_unactuated_ur5_conserves_energy():
     """The UR5 falling from its example pose with no joint torques: E = T + V is constant."""
-    from kronlag.modelfile import load_example
-    from kronlag.workflows import simulate_model
+    from kronlag.app.workflows import simulate_model
+    from kronlag.model.builtin import load_example
 
     trajectory = simulate_model(load_example("ur5"))
     assert trajectory.success

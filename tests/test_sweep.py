@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import kronlag
-from kronlag.modelfile import load_example
-from kronlag.sweeps import grid, sweep
+from kronlag.model.builtin import load_example
+from kronlag.studies.sweeps import grid, sweep
 
 T_EVAL = np.linspace(0.0, 1.0, 21)
 
@@ -92,7 +92,7 @@ def test_local_cluster_loses_nothing_when_a_worker_is_killed_mid_sweep(model):
 
 
 def test_cli_sweep_writes_the_table_and_fails_on_failed_cases(tmp_path, capsys):
-    from kronlag.cli import main
+    from kronlag.app.cli import main
 
     table = tmp_path / "sweep.csv"
     assert main(["sweep", "four_bar", "--grid", "m3=2:4:3", "--t-end", "0.5", "--points", "11", "--workers", "0",

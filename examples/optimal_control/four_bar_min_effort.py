@@ -6,7 +6,7 @@ piecewise constant on N intervals, that swings the crank by SWING rad in
 DURATION s and stops it there, with the least effort ``integral tau^2 dt``.
 
 Direct multiple shooting: the state ``x = [q; qd]`` (6) at N + 1 nodes, the
-forward dynamics of the constrained system (``kronlag.interop.casadi_functions``:
+forward dynamics of the constrained system (``kronlag.symbolic.interop.casadi_functions``:
 ``[[M, Phi_q^T], [Phi_q, 0]] [qdd; lambda] = [f_Q - C qd - g; gamma]``) integrated
 by RK4 across each interval, continuity at the nodes, the crank angle and speed
 prescribed at the end.  IPOPT ships with the casadi wheel.  The torque found is
@@ -24,8 +24,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import kronlag
-from kronlag.interop import casadi_functions
-from kronlag.modelfile import load_example
+from kronlag.model.builtin import load_example
+from kronlag.symbolic.interop import casadi_functions
 
 SWING, DURATION, INTERVALS, RK4_STEPS = 1.0, 1.5, 30, 4
 

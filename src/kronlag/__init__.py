@@ -4,47 +4,63 @@ Kronecker-product matrix form of Lagrange's equations with multipliers
 
     M(q) qdd + C(q, qd) qd + Phi_q^T lambda + A^T mu + g(q) = f_Q
     f(q) = 0,   A(q) qd + b(q) = 0
+
+The package is built in layers, each a subpackage that imports only from those below it
+(``docs/architecture.md``; the direction is tested)::
+
+    core -> model -> symbolic -> numeric -> simulation -> studies -> views -> app
+
+This module gathers the public names; the module paths of earlier versions
+(``kronlag.numeric``, ``kronlag.trajectory``, ...) keep working (:mod:`kronlag._legacy`).
 """
 
-from . import calculus, frames, joints, models
-from .analysis import Equilibrium, EquilibriumError, LinearModel
-from .derivation import derive
-from .drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
-from .equations import Equations
-from .modelfile import load_model
-from .numeric import (
+from importlib.metadata import PackageNotFoundError, version
+
+from . import _legacy
+
+_legacy.install()
+
+from . import calculus, frames, joints, models  # noqa: E402  (old module paths: after the hook)
+from .core.errors import (  # noqa: E402
     ActuationWarning,
     AssemblyError,
-    ForwardDynamicsBatch,
-    ForwardDynamicsResult,
-    InverseDynamicsResult,
-    NumericModel,
+    CompilerError,
+    EquilibriumError,
+    InitialStateWarning,
+    InputError,
+    KronlagError,
+    ModelError,
+    NumericalError,
+    ProjectionError,
     RedundantConstraintsWarning,
     SingularConfigurationError,
 )
-from .simulation import simulate
-from .sweeps import SweepResult, sweep
-from .trajectory import Result, SingularPassage, Trajectory
-from .reactions import Reaction
-from .joints import FreeBody, Joint, free_body, mechanism
-from .frames import Frame
-from .system import (
-    Damper,
-    ModelError,
-    PlanarBody,
-    PointMass,
-    RigidBody,
-    RotationSequence,
-    Spring,
-    System,
-    acceleration_symbol,
-    check_parameter_values,
-    coordinates,
-    speed_symbol,
-    t,
-)
+from .model.bodies import PlanarBody, PointMass, RigidBody, check_parameter_values  # noqa: E402
+from .model.frames import Frame  # noqa: E402
+from .model.free_bodies import FreeBody, free_body, mechanism  # noqa: E402
+from .model.joints import Joint  # noqa: E402
+from .model.loads import Damper, Spring  # noqa: E402
+from .model.modelfile import load_model  # noqa: E402
+from .model.rotations import RotationSequence  # noqa: E402
+from .model.symbols import acceleration_symbol, coordinates, speed_symbol, t  # noqa: E402
+from .model.system import System  # noqa: E402
+from .numeric.numeric_model import NumericModel  # noqa: E402
+from .numeric.reactions import Reaction  # noqa: E402
+from .numeric.results import ForwardDynamicsBatch, ForwardDynamicsResult, InverseDynamicsResult  # noqa: E402
+from .simulation.problem import Solver  # noqa: E402
+from .simulation.simulate import simulate  # noqa: E402
+from .simulation.trajectory import Result, SingularPassage, Trajectory  # noqa: E402
+from .studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis  # noqa: E402
+from .studies.equilibrium import Equilibrium  # noqa: E402
+from .studies.linearization import LinearModel  # noqa: E402
+from .studies.sweeps import SweepResult, sweep  # noqa: E402
+from .symbolic.derivation import derive  # noqa: E402
+from .symbolic.equations import Equations  # noqa: E402
 
-__version__ = "0.1.0"
+try:
+    __version__ = version("kronlag")
+except PackageNotFoundError:  # running from a source tree that was never installed
+    __version__ = "0+unknown"
 
 __all__ = [
     "calculus",
@@ -68,7 +84,6 @@ __all__ = [
     "PointMass",
     "Spring",
     "Damper",
-    "ModelError",
     "coordinates",
     "speed_symbol",
     "acceleration_symbol",
@@ -77,21 +92,29 @@ __all__ = [
     "ForwardDynamicsResult",
     "ForwardDynamicsBatch",
     "InverseDynamicsResult",
-    "SingularConfigurationError",
-    "AssemblyError",
-    "RedundantConstraintsWarning",
-    "ActuationWarning",
     "kinematic_analysis",
     "Kinematics",
     "inverse_dynamics",
     "InverseDynamicsRun",
     "simulate",
+    "Solver",
     "Trajectory",
     "SingularPassage",
     "Result",
     "Equilibrium",
-    "EquilibriumError",
     "LinearModel",
     "sweep",
     "SweepResult",
+    "KronlagError",
+    "InputError",
+    "ModelError",
+    "NumericalError",
+    "SingularConfigurationError",
+    "AssemblyError",
+    "ProjectionError",
+    "EquilibriumError",
+    "CompilerError",
+    "RedundantConstraintsWarning",
+    "ActuationWarning",
+    "InitialStateWarning",
 ]

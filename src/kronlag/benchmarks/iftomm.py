@@ -40,10 +40,13 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.special import ellipj, ellipk
 
-from .. import models
-from ..numeric import NumericModel
-from ..system import System
-from ..trajectory import Trajectory
+from ..core.errors import InputError
+from ..model import builtin as models
+from ..model.system import System
+from ..numeric.numeric_model import NumericModel
+from ..simulation.simulate import simulate
+from ..simulation.trajectory import Trajectory
+from ..symbolic.derivation import derive
 
 __all__ = ["Benchmark", "benchmark", "BENCHMARKS", "ANDREWS_REFERENCE_Q", "ANDREWS_REFERENCE_QD"]
 
@@ -106,8 +109,6 @@ class Benchmark:
 
     def numeric(self, *, backend: str = "auto") -> NumericModel:
         """The numeric model with :attr:`parameters` (derived and compiled afresh)."""
-        from ..derivation import derive
-
         return derive(self.build(**self.options)).numeric(dict(self.parameters), backend=backend)
 
     def initial_state(self, model: NumericModel) -> tuple[np.ndarray, np.ndarray]:
@@ -122,8 +123,6 @@ class Benchmark:
                  atol: float = 1e-10, t_eval=None) -> Trajectory:
         """:func:`kronlag.simulate` over :attr:`t_span` from :meth:`initial_state`, outputs at
         ``t_eval`` (default :attr:`t_eval`); ``model`` defaults to :meth:`numeric`."""
-        from ..simulation import simulate
-
         model = self.numeric() if model is None else model
         q0, qd0 = self.initial_state(model)
         return simulate(model, self.t_span, q0, qd0, method=method, rtol=rtol, atol=atol,
@@ -367,5 +366,5 @@ BENCHMARKS: dict[str, Callable[..., Benchmark]] = {
 def benchmark(code: str, **options) -> Benchmark:
     """The benchmark ``code`` (``"A01"`` ... ``"A05"``); ``benchmark("A02", n=4)`` for N = 4."""
     if code not in BENCHMARKS:
-        raise ValueError(f"unknown IFToMM benchmark {code!r}; choose from {', '.join(BENCHMARKS)}")
+        raise InputError(f"unknown IFToMM benchmark {code!r}; choose from {', '.join(BENCHMARKS)}")
     return BENCHMARKS[code](**options)

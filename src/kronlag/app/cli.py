@@ -1,0 +1,81 @@
+"""Command-line interface: a thin shell over the Python API.
+
+MODEL is the name of a built-in model or shipped example (``kronlag models``
+lists them) or the path of a TOML model file (format: :mod:`kronlag.modelfile`).
+
+Exit status: 0 success; 2 bad input, found before any computation (one line
+on stderr, no traceback); 1 the run did not complete: a numerical failure or an
+output that could not be written (the other outputs are written, and what was
+computed is saved; stderr says where).
+
+The exit status follows the class of what went wrong (:data:`EXIT_CODES`, the hierarchy of
+:mod:`kronlag.core.errors`): bad input (:class:`~kronlag.core.errors.InputError`, an unreadable
+file) is 2, an incomplete run (:class:`~kronlag.core.errors.NumericalError`,
+:class:`~kronlag.core.errors.CompilerError`, :class:`~kronlag.app.outputs.IncompleteRun`) is 1;
+anything else is a bug and shows its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable, Sequence
+
+from ..core.errors import CompilerError, InputError, NumericalError
+from . import analysis_commands, commands
+from .outputs import IncompleteRun
+
+__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_INCOMPLETE", "EXIT_BAD_INPUT", "EXIT_CODES"]
+
+EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT = 0, 1, 2
+
+#: Exit status and message prefix by exception class, the first match in this order.
+EXIT_CODES: tuple[tuple[type[BaseException], int, str], ...] = (
+    (IncompleteRun, EXIT_INCOMPLETE, ""),
+    (NumericalError, EXIT_INCOMPLETE, "numerical failure: "),
+    (CompilerError, EXIT_INCOMPLETE, "compiled code: "),
+    (InputError, EXIT_BAD_INPUT, "error: "),
+    (OSError, EXIT_BAD_INPUT, "error: "),
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``kronlag`` argument parser."""
+    parser = argparse.ArgumentParser(prog="kronlag", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, handler: Callable[[argparse.Namespace], None], summary: str,
+                *, model: bool = True) -> argparse.ArgumentParser:
+        sub = subparsers.add_parser(name, help=summary, description=summary)
+        sub.set_defaults(handler=handler)
+        if model:
+            sub.add_argument("model", metavar="MODEL", help="built-in model name or path of a TOML model file")
+        return sub
+
+    commands.add_commands(command)
+    analysis_commands.add_commands(command)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line ``argv`` (default: ``sys.argv[1:]``); returns the exit status."""
+    try:
+        arguments = build_parser().parse_args(argv)
+    except SystemExit as exit_request:  # --help, or a usage error (argparse printed it)
+        return int(exit_request.code or 0)
+    try:
+        arguments.handler(arguments)
+    except BrokenPipeError:  # the reader of standard output quit early (| head)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
+    except tuple(kind for kind, _, _ in EXIT_CODES) as error:
+        status, prefix = next((status, prefix) for kind, status, prefix in EXIT_CODES if isinstance(error, kind))
+        print(f"kronlag: {prefix}{error}", file=sys.stderr)
+        return status
+    return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())

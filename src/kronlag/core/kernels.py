@@ -1,0 +1,309 @@
+"""The one route from symbolic expressions to numbers: kernels.
+
+A *kernel* evaluates a few named matrices of SymPy expressions at given inputs
+and writes their entries, row-major and one block after the other, into a flat
+output.  The expressions are prepared once for every printer:
+SymPy -> SymEngine (memoized, so that shared subexpressions are converted once;
+numbers exact where a double holds them exactly, see :class:`ExpressionConverter`),
+common-subexpression elimination with ``symengine.cse``
+(:func:`cse_kernel`), inputs renamed to array entries such as ``q[i]``.
+
+The printers only write the result out: :func:`python_source` (Python, run on
+floats with :mod:`math` or on NumPy arrays for many states at once, or on
+CasADi / JAX objects by :mod:`kronlag.symbolic.interop`) here, C in
+:mod:`kronlag.numeric.codegen`.  :class:`ExpressionFunction` compiles named
+matrices of any inputs into a Python function in one call; every layer that
+needs numbers from expressions goes through it or through the numeric model's
+kernels (:class:`kronlag.numeric.codegen.KernelSource`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import symengine as se
+import sympy as sp
+
+from .errors import InputError, ModelError
+
+__all__ = [
+    "Block",
+    "Kernel",
+    "ExpressionConverter",
+    "cse_kernel",
+    "literal",
+    "python_source",
+    "python_functions",
+    "SCALAR_NAMESPACE",
+    "ARRAY_NAMESPACE",
+    "ExpressionFunction",
+    "expression_kernel",
+    "PLACEHOLDER",
+]
+
+
+@dataclass(frozen=True)
+class Block:
+    """One output matrix of a kernel: its name and shape (a vector has ``(n, 1)``)."""
+
+    name: str
+    shape: tuple[int, int]
+
+    @property
+    def size(self) -> int:
+        return self.shape[0] * self.shape[1]
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """A kernel after common-subexpression elimination, ready to print.
+
+    ``temporaries`` are ``(symbol, expression)`` pairs in evaluation order;
+    ``outputs`` are the entries of all ``blocks``, row-major, concatenated;
+    ``constants`` maps the placeholder symbols ``K<i>`` standing for numbers
+    that are not small exact integers or fractions to their double values
+    (printed as correctly rounded floating-point literals, see :func:`literal`).
+    """
+
+    name: str
+    blocks: tuple[Block, ...]
+    temporaries: tuple[tuple[se.Symbol, se.Basic], ...]
+    outputs: tuple[se.Basic, ...]
+    constants: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def size(self) -> int:
+        return sum(block.size for block in self.blocks)
+
+
+#: Integers and the numerators and denominators of fractions up to this size are exact doubles:
+#: they stay exact in SymEngine and print as C/Python numbers that the compiler reads exactly.
+_EXACT_LIMIT = 2**53
+
+#: The placeholder symbols ``K<i>`` of constants printed as literals (:attr:`Kernel.constants`).
+PLACEHOLDER = re.compile(r"\bK\d+\b")
+
+
+def literal(value: float) -> str:
+    """``value`` as a floating-point literal read back exactly (shortest round trip), parenthesized if negative."""
+    text = repr(float(value))
+    return f"({text})" if value < 0 else text
+
+
+
+class ExpressionConverter:
+    """SymPy -> SymEngine, memoized, with the inputs renamed (``renames``: e.g. ``q1`` -> ``q[0]``).
+
+    Numbers: integers and fractions whose parts are at most 2**53 stay exact
+    (they print as ``3`` or ``1.0/3.0``, exact doubles divided once, so correctly
+    rounded); floats become such fractions when they can.  Every other real
+    number (``10**20``, ``2**64``, ``1e-300``, ``1/3`` of huge parts) becomes a
+    placeholder symbol ``K<i>`` whose value, ``float(number)`` (correctly
+    rounded), is kept in :attr:`constants` and printed as a literal: an integer
+    literal never reaches C, where a large one would overflow.  Complex and
+    non-finite numbers are a :class:`~kronlag.core.errors.ModelError`.
+    """
+
+    def __init__(self, renames: dict[sp.Symbol, se.Symbol]):
+        self.memo: dict = dict(renames)
+        self.constants: dict[str, float] = {}
+        self._placeholders: dict[float, se.Symbol] = {}
+
+    def __call__(self, expr: sp.Basic) -> se.Basic:
+        result = self.memo.get(expr)
+        if result is None:
+            result = self._build(expr)
+            self.memo[expr] = result
+        return result
+
+    def _build(self, expr: sp.Basic) -> se.Basic:
+        if expr.is_Number or expr in (sp.I, sp.zoo):
+            return self._number(expr)
+        if isinstance(expr, sp.Symbol):
+            raise InputError(f"symbol {expr} is not an input of the expressions (inputs: "
+                             f"{', '.join(sorted(str(s) for s in self.memo if isinstance(s, sp.Symbol)))})")
+        if not expr.args:
+            return se.sympify(expr)
+        args = [self(arg) for arg in expr.args]
+        if expr.is_Add:
+            return se.Add(*args)
+        if expr.is_Mul:
+            return se.Mul(*args)
+        if expr.is_Pow:
+            return se.Pow(*args)
+        function = getattr(se, type(expr).__name__, None)
+        if function is None:
+            raise NotImplementedError(f"cannot generate code for {type(expr).__name__}: {expr}")
+        return function(*args)
+
+    def _number(self, number: sp.Basic) -> se.Basic:
+        if number.is_extended_real is False or number is sp.zoo:
+            raise ModelError(f"the complex constant {number} has no numeric value in real arithmetic")
+        if not number.is_finite:
+            raise ModelError(f"the non-finite constant {number} has no numeric value")
+        if number.is_Float:
+            value = float(number)
+            if not math.isfinite(value):
+                raise ModelError(f"the constant {number} overflows a double")
+            number = sp.Rational(*value.as_integer_ratio())
+        if max(abs(number.p), number.q) <= _EXACT_LIMIT:
+            return se.Rational(int(number.p), int(number.q))
+        value = float(number)  # correctly rounded: SymPy divides Python integers
+        if not math.isfinite(value):
+            raise ModelError(f"the constant {number} overflows a double")
+        symbol = self._placeholders.get(value)
+        if symbol is None:
+            symbol = self._placeholders[value] = se.Symbol(f"K{len(self._placeholders)}")
+            self.constants[symbol.name] = value
+        return symbol
+
+    def matrix(self, matrix: sp.MatrixBase, name: str = "matrix") -> list[list[se.Basic]]:
+        """The entries of ``matrix`` (called ``name`` in errors) converted."""
+        return [[self.entry(matrix[i, j], f"{name}[{i}, {j}]") for j in range(matrix.cols)]
+                for i in range(matrix.rows)]
+
+    def entry(self, expr: sp.Basic, where: str) -> se.Basic:
+        """``expr`` converted; a :class:`ModelError` names ``where`` it stands."""
+        try:
+            return self(expr)
+        except ModelError as error:
+            raise ModelError(f"{where} = {expr}: {error}") from None
+
+
+
+def _maximum(*values):
+    return functools.reduce(np.maximum, values)
+
+
+def _minimum(*values):
+    return functools.reduce(np.minimum, values)
+
+
+#: The generated Python source runs in one of two namespaces: :mod:`math` on floats (one
+#: state: fastest in pure Python), or NumPy on arrays (many states at once, vectorised).
+_FUNCTION_NAMES = ("sin", "cos", "tan", "sinh", "cosh", "tanh", "exp", "log", "sqrt", "floor", "pi", "e")
+SCALAR_NAMESPACE: dict[str, object] = {name: getattr(math, name) for name in _FUNCTION_NAMES}
+SCALAR_NAMESPACE.update({name: getattr(math, name) for name in ("asin", "acos", "atan", "atan2", "asinh",
+                                                                 "acosh", "atanh")},
+                         E=math.e, ceiling=math.ceil, abs=abs, max=max, min=min,
+                         sign=lambda x: math.copysign(1.0, x) if x else 0.0)
+ARRAY_NAMESPACE: dict[str, object] = {name: getattr(np, name) for name in _FUNCTION_NAMES}
+ARRAY_NAMESPACE.update(asin=np.arcsin, acos=np.arccos, atan=np.arctan, atan2=np.arctan2, asinh=np.arcsinh,
+                        acosh=np.arccosh, atanh=np.arctanh, E=np.e, ceiling=np.ceil, abs=np.abs,
+                        max=_maximum, min=_minimum, sign=np.sign)
+
+
+def python_source(kernel: Kernel, arguments: Sequence[str] = ("t", "q", "qd", "p")) -> str:
+    """Python source of ``kernel_<name>(*arguments) -> list`` (the flat output): with the default
+    arguments ``q[i]``, ``qd[i]``, ``p[i]`` and ``t`` may be floats (one state) or equally shaped
+    arrays (many states, :data:`ARRAY_NAMESPACE`)."""
+    def code(expr: se.Basic) -> str:
+        return PLACEHOLDER.sub(lambda match: literal(kernel.constants[match.group(0)]), str(expr))
+
+    lines = [f"def kernel_{kernel.name}({', '.join(arguments)}):"]
+    lines += [f"    {symbol} = {code(expr)}" for symbol, expr in kernel.temporaries]
+    lines.append("    return [" + ", ".join(code(expr) for expr in kernel.outputs) + "]")
+    return "\n".join(lines) + "\n"
+
+
+
+def cse_kernel(name: str, blocks: Sequence[Block], matrices: Sequence[list[list[se.Basic]]],
+               constants: Mapping[str, float]) -> Kernel:
+    """The :class:`Kernel` ``name`` of the converted ``matrices`` (one per block), with common
+    subexpressions eliminated over all of them (``symengine.cse``)."""
+    flat = [entry for rows in matrices for row in rows for entry in row]
+    temporaries, outputs = se.cse(flat) if flat else ([], [])
+    return Kernel(name, tuple(blocks), tuple(temporaries), tuple(outputs), dict(constants))
+
+
+def python_functions(source: str, names: Sequence[str], namespace: Mapping[str, object]) -> dict[str, Callable]:
+    """Run ``source`` (of :func:`python_source`: our own generated text, never user text) in
+    ``namespace`` and return its functions ``kernel_<name>`` by ``name``.
+
+    Raises
+    ------
+    NotImplementedError
+        The source calls a function that ``namespace`` does not define.
+    """
+    code = compile(source, "<kronlag generated>", "exec")
+    unknown = sorted({called for const in code.co_consts if hasattr(const, "co_names")
+                      for called in const.co_names} - set(namespace))
+    if unknown:
+        raise NotImplementedError(f"no numeric implementation of the function(s) {', '.join(unknown)}")
+    scope = dict(namespace, __builtins__={})
+    exec(code, scope)  # our own generated source, never user text
+    return {name: scope[f"kernel_{name}"] for name in names}
+
+
+def expression_kernel(matrices: Mapping[str, sp.MatrixBase], inputs: Sequence[tuple[str, object]], *,
+                      name: str = "expressions") -> Kernel:
+    """The :class:`Kernel` ``name`` of the named ``matrices``, whose inputs are ``inputs``: pairs of an
+    argument name and either one symbol (a scalar argument, e.g. the time) or a sequence of symbols
+    (a vector argument, read as ``argument[i]``).  Print it with
+    ``python_source(kernel, [argument for argument, _ in inputs])``."""
+    renames: dict = {}
+    for argument, symbols in inputs:
+        if isinstance(symbols, sp.Symbol):
+            renames[symbols] = se.Symbol(argument)
+        else:
+            renames.update({symbol: se.Symbol(f"{argument}[{i}]") for i, symbol in enumerate(symbols)})
+    converter = ExpressionConverter(renames)
+    blocks = tuple(Block(key, sp.Matrix(matrix).shape) for key, matrix in matrices.items())
+    converted = [converter.matrix(sp.Matrix(matrix), key) for key, matrix in matrices.items()]
+    return cse_kernel(name, blocks, converted, converter.constants)
+
+
+class ExpressionFunction:
+    """Named matrices of SymPy expressions compiled into one Python function of named inputs.
+
+    Parameters
+    ----------
+    matrices : mapping of str to SymPy matrix
+        What to evaluate, by name.
+    inputs : sequence of (str, sequence of sympy.Symbol)
+        The arguments in order, each a name and the symbols whose values it carries (a vector;
+        see :func:`expression_kernel`).
+    name : str
+        An identifier naming the kernel in errors.
+
+    Examples
+    --------
+    >>> x, y = sp.symbols("x y")
+    >>> evaluate = ExpressionFunction({"r": sp.Matrix([x * y, x + y])}, [("v", (x, y))])
+    >>> evaluate([2.0, 3.0])["r"].tolist()
+    [[6.0], [5.0]]
+    """
+
+    def __init__(self, matrices: Mapping[str, sp.MatrixBase], inputs: Sequence[tuple[str, Sequence[sp.Symbol]]],
+                 *, name: str = "expressions"):
+        self.kernel = expression_kernel(matrices, inputs, name=name)
+        source = python_source(self.kernel, [argument for argument, _ in inputs])
+        self._scalar = python_functions(source, [name], SCALAR_NAMESPACE)[name]
+        self._array = python_functions(source, [name], ARRAY_NAMESPACE)[name]
+
+    def __call__(self, *values) -> dict[str, np.ndarray]:
+        """The matrices at one point (``values``: one float vector per input), each of its shape."""
+        flat = np.array(self._scalar(*(np.asarray(value, dtype=float).tolist() for value in values)), dtype=float)
+        return self._split(flat)
+
+    def batch(self, *values) -> dict[str, np.ndarray]:
+        """The matrices at N points (``values``: one (N, k) array per input), each (N, *shape)."""
+        arrays = [np.asarray(value, dtype=float) for value in values]
+        n = len(arrays[0])
+        rows = self._array(*(array.T for array in arrays))
+        flat = np.empty((n, self.kernel.size))
+        for column, row in enumerate(rows):
+            flat[:, column] = row
+        return self._split(flat)
+
+    def _split(self, flat: np.ndarray) -> dict[str, np.ndarray]:
+        values, start = {}, 0
+        for block in self.kernel.blocks:
+            values[block.name] = flat[..., start:start + block.size].reshape(flat.shape[:-1] + block.shape)
+            start += block.size
+        return values

@@ -1,0 +1,117 @@
+"""A model file in memory: the :class:`~kronlag.model.system.System` and the numbers for running it."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from ...core.errors import ModelError
+from ..system import System
+
+__all__ = ["ModelFile", "SimulationSettings", "PrescribedMotion", "to_float"]
+
+
+@dataclass
+class SimulationSettings:
+    """Settings of a simulation run (see :func:`kronlag.simulate`)."""
+
+    t_end: float = 1.0
+    method: str = "auto"
+    rtol: float = 1e-8
+    atol: float = 1e-10
+
+
+@dataclass(frozen=True)
+class PrescribedMotion:
+    """A drive of a model file: ``target(q) = motion(t)`` (a coordinate or an expression of the
+    coordinates; an expression of ``t`` and the parameters)."""
+
+    target: sp.Expr
+    motion: sp.Expr
+
+
+@dataclass
+class ModelFile:
+    """A system together with the numbers needed to run it.
+
+    Attributes
+    ----------
+    system : System
+    description : str
+    values : dict of str to sympy.Expr
+        Parameter values as written: numbers, or expressions of other
+        parameters (``"m1*l1**2/12"``); see :meth:`numeric_values`.
+    units : dict of str to str
+        SI units of the parameters (a file's units are parsed with ``pint`` and its values
+        converted to SI base units: ``300`` in ``"mm"`` is stored as 0.3 in ``"m"``).
+    q_guess, qd_guess : dict of str to sympy.Expr
+        Assembly guesses by coordinate name (may use parameters); missing
+        coordinates default to 0.
+    fixed, qd_fixed : tuple of str
+        Coordinates whose position / speed assembly keeps at the guess.
+    simulation : SimulationSettings
+    drives : dict of str to PrescribedMotion
+        Prescribed motions by drive name (``target(q) = motion(t)``) for
+        kinematic analysis and inverse dynamics; they become drives
+        (:meth:`kronlag.System.add_drive`) in :func:`kronlag.workflows.driven_model`.
+    source : str or None
+        The file the model was read from.
+    """
+
+    system: System
+    description: str = ""
+    values: dict[str, sp.Expr] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    q_guess: dict[str, sp.Expr] = field(default_factory=dict)
+    fixed: tuple[str, ...] = ()
+    qd_guess: dict[str, sp.Expr] = field(default_factory=dict)
+    qd_fixed: tuple[str, ...] = ()
+    simulation: SimulationSettings = field(default_factory=SimulationSettings)
+    drives: dict[str, PrescribedMotion] = field(default_factory=dict)
+    source: str | None = None
+
+    def numeric_values(self) -> dict[str, float]:
+        """Parameter values as floats, resolving values written in terms of other parameters.
+
+        Raises
+        ------
+        ModelError
+            A value depends on a parameter without a value, or values depend on
+            each other in a cycle.
+        """
+        resolved: dict[str, float] = {}
+        pending = {name: sp.sympify(value, strict=True) for name, value in self.values.items()}
+        while pending:
+            ready = [name for name, value in pending.items()
+                     if {symbol.name for symbol in value.free_symbols} <= resolved.keys()]
+            if not ready:
+                missing = sorted({s.name for value in pending.values() for s in value.free_symbols}
+                                 - pending.keys() - resolved.keys())
+                if missing:
+                    raise ModelError(f"parameter values use parameters without a value: {', '.join(missing)}")
+                raise ModelError(f"parameter values depend on each other in a cycle: {', '.join(sorted(pending))}")
+            for name in ready:
+                resolved[name] = to_float(pending.pop(name), resolved, f"value of parameter {name}")
+        return resolved
+
+    def guess_vectors(self) -> tuple[list[float], list[float]]:
+        """The assembly guesses ``(q, qd)`` as lists in coordinate order (0 where not given)."""
+        values = self.numeric_values()
+        names = [q.name for q in self.system.coordinates]
+        return ([to_float(self.q_guess.get(name, 0), values, f"initial q of {name}") for name in names],
+                [to_float(self.qd_guess.get(name, 0), values, f"initial qd of {name}") for name in names])
+
+
+def to_float(expression, values: Mapping[str, float], what: str) -> float:
+    expr = sp.sympify(expression, strict=True)
+    unknown = sorted(s.name for s in expr.free_symbols if s.name not in values)
+    if unknown:
+        raise ModelError(f"{what} uses symbols without a value: {', '.join(unknown)}")
+    number = expr.subs({s: values[s.name] for s in expr.free_symbols}).evalf()
+    if not number.is_real or not math.isfinite(float(number)):
+        raise ModelError(f"{what} is not a finite real number: {number}")
+    return float(number)
+

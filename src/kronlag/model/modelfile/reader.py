@@ -1,0 +1,473 @@
+"""Reading model files: TOML parsed into a :class:`~kronlag.model.modelfile.model_file.ModelFile`,
+every error located as ``FILE: ENTRY: problem`` (entries indexed from 0)."""
+
+from __future__ import annotations
+
+import keyword
+import math
+import tomllib
+import unicodedata
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import sympy as sp
+
+from ...core.errors import ExpressionError, ModelError, ModelFileError
+from ..bodies import PlanarBody, PointMass, RigidBody
+from ..expressions import RESERVED_NAMES, parse_expression
+from ..rotations import MAX_ROTATION_FACTORS, RotationSequence
+from ..symbols import speed_symbol, t
+from ..system import System, drive_name
+from .model_file import ModelFile, PrescribedMotion, SimulationSettings
+from .units import si_unit
+
+__all__ = ["loads_model", "load_model"]
+
+_BODY_TYPES = ("planar", "rigid", "point")
+
+
+class _Reader:
+    """Reads one parsed TOML document, naming the file and the entry in every error."""
+
+    def __init__(self, source: str):
+        self.source = source
+        self.symbols: dict[str, sp.Symbol] = {}
+        self.points: dict[str, list[sp.Expr]] = {}
+        # ``<point>_x``, ``<point>_y``, ``<point>_z`` in expressions: placeholders and their values
+        self.point_symbols: dict[str, sp.Symbol] = {}
+        self.point_values: dict[sp.Symbol, sp.Expr] = {}
+
+    def add_point(self, name: str, position: list[sp.Expr], entry: str) -> None:
+        """Register a named point, and its coordinates ``<name>_x, ...`` for expressions."""
+        if name in self.points:
+            raise self.error(entry, f"the point name {name!r} is used twice")
+        components = {f"{name}_{axis}": value for axis, value in zip("xyz", position)}
+        clash = [key for key in components if key in self.symbols]
+        if clash:
+            raise self.error(entry, f"the coordinate names {', '.join(clash)} of point {name!r} are already "
+                                    "declared symbols; rename the point")
+        self.points[name] = position
+        for key, value in components.items():
+            placeholder = sp.Dummy(key)
+            self.point_symbols[key] = placeholder
+            self.point_values[placeholder] = value
+
+    def error(self, entry: str, problem: str) -> ModelFileError:
+        return ModelFileError(f"{self.source}: {entry}: {problem}")
+
+    @contextmanager
+    def entry(self, entry: str) -> Iterator[None]:
+        """Re-raise a :class:`ModelError` of the API (not already located) with file and entry."""
+        try:
+            yield
+        except (ModelFileError, ExpressionError):
+            raise
+        except ModelError as error:
+            raise self.error(entry, str(error)) from None
+
+    def table(self, value, entry: str, *, required: Sequence[str] = (), optional: Sequence[str] = ()) -> dict:
+        if not isinstance(value, dict):
+            raise self.error(entry, f"expected a table, got {_kind(value)}")
+        allowed = (*required, *optional)
+        for key in value:
+            if key not in allowed:
+                raise self.error(f"{entry}.{key}" if entry else key,
+                                 f"unknown field; expected one of {', '.join(allowed)}")
+        for key in required:
+            if key not in value:
+                raise self.error(entry or "file", f"missing field {key!r}")
+        return value
+
+    def tables(self, document: dict, key: str, **fields) -> list[tuple[str, dict]]:
+        """The entries of an array of tables ``[[key]]`` as ``(entry name, table)``."""
+        items = document.get(key, [])
+        if not isinstance(items, list):
+            raise self.error(key, f"expected an array of tables ([[{key}]]), got {_kind(items)}")
+        return [(f"{key}[{i}]", self.table(item, f"{key}[{i}]", **fields)) for i, item in enumerate(items)]
+
+    def string(self, value, entry: str) -> str:
+        if not isinstance(value, str):
+            raise self.error(entry, f"expected a string, got {_kind(value)}")
+        return value
+
+    def name(self, value, entry: str) -> str:
+        name = self.string(value, entry)
+        if unicodedata.normalize("NFKC", name) != name:
+            raise self.error(entry, f"{name!r} is not plain text: expressions would read it as "
+                                    f"{unicodedata.normalize('NFKC', name)!r} (its NFKC form)")
+        if not name.isidentifier() or keyword.iskeyword(name) or name in RESERVED_NAMES or name == "t":
+            raise self.error(entry, f"{name!r} cannot be a symbol name: use letters, digits and '_' "
+                                    "(not starting with a digit), and not a function name, pi, t or a keyword")
+        return name
+
+    def names(self, value, entry: str, *, known: Sequence[str]) -> tuple[str, ...]:
+        if not isinstance(value, list):
+            raise self.error(entry, f"expected a list of names, got {_kind(value)}")
+        names = tuple(self.string(item, f"{entry}[{i}]") for i, item in enumerate(value))
+        for i, name in enumerate(names):
+            if name not in known:
+                raise self.error(f"{entry}[{i}]", f"unknown coordinate {name!r}; coordinates are {', '.join(known)}")
+        return names
+
+    def number(self, value, entry: str, *, positive: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise self.error(entry, f"expected a finite number, got {_kind(value)}")
+        if positive and value <= 0:
+            raise self.error(entry, f"expected a positive number, got {value}")
+        return float(value)
+
+    def expression(self, value, entry: str, symbols: Mapping[str, sp.Symbol] | None = None) -> sp.Expr:
+        if isinstance(value, bool) or not isinstance(value, int | float | str):
+            raise self.error(entry, f"expected a number or an expression string, got {_kind(value)}")
+        if isinstance(value, int):
+            return sp.Integer(value)
+        if isinstance(value, float):
+            if not math.isfinite(value):
+                raise self.error(entry, f"expected a finite number, got {value}")
+            return sp.Float(value)
+        if symbols is not None:
+            return parse_expression(value, symbols, what=f"{self.source}: {entry}")
+        expression = parse_expression(value, self.symbols | self.point_symbols, what=f"{self.source}: {entry}")
+        return expression.xreplace(self.point_values)
+
+    def vector(self, value, entry: str, lengths: Sequence[int]) -> list[sp.Expr]:
+        expected = " or ".join(map(str, lengths))
+        if not isinstance(value, list):
+            raise self.error(entry, f"expected a list of {expected} expressions, got {_kind(value)}")
+        if len(value) not in lengths:
+            raise self.error(entry, f"expected {expected} entries, got {len(value)}")
+        return [self.expression(item, f"{entry}[{i}]") for i, item in enumerate(value)]
+
+    def matrix(self, value, entry: str, rows: int, cols: int) -> list[list[sp.Expr]]:
+        if not isinstance(value, list) or len(value) != rows or not all(isinstance(row, list) for row in value):
+            raise self.error(entry, f"expected a {rows}x{cols} matrix (a list of {rows} rows), got {_shape(value)}")
+        return [self.vector(row, f"{entry}[{i}]", (cols,)) for i, row in enumerate(value)]
+
+    def point(self, value, entry: str, lengths: Sequence[int] = (2, 3)) -> list[sp.Expr]:
+        """A point: a list of expressions, or the name of an entry of ``[points]``."""
+        if not isinstance(value, str):
+            return self.vector(value, entry, lengths)
+        if value not in self.points:
+            known = ", ".join(self.points) or "none are defined"
+            raise self.error(entry, f"unknown point {value!r} (named points: {known})")
+        point = self.points[value]
+        if len(point) not in lengths:
+            raise self.error(entry, f"expected {' or '.join(map(str, lengths))} entries, "
+                                    f"but point {value!r} has {len(point)}")
+        return point
+
+
+def _kind(value) -> str:
+    """How an error message describes a TOML value."""
+    if isinstance(value, dict | list):
+        return "a table" if isinstance(value, dict) else "a list"
+    names = {bool: "a boolean", str: "a string", int: "an integer", float: "a number"}
+    return f"{names.get(type(value), type(value).__name__)} ({value!r})"
+
+
+def _shape(value) -> str:
+    if isinstance(value, list):
+        lengths = [len(row) if isinstance(row, list) else "scalar" for row in value]
+        return f"a list of {len(value)} entries ({lengths})"
+    return _kind(value)
+
+
+def _read(document: dict, source: str) -> ModelFile:
+    reader = _Reader(source)
+    reader.table(document, "", required=("coordinates",), optional=(
+        "name", "description", "gravity", "parameters", "points", "bodies", "constraints",
+        "nonholonomic_constraints", "springs", "dampers", "potentials", "forces", "torques",
+        "generalized_forces", "initial", "simulation", "drives", "drawing", "traces", "joints"))
+    name = reader.string(document.get("name", Path(source).stem), "name")
+    description = reader.string(document.get("description", ""), "description")
+    coordinate_list = document["coordinates"]
+    if not isinstance(coordinate_list, list) or not coordinate_list:
+        raise reader.error("coordinates", f"expected a non-empty list of names, got {_kind(coordinate_list)}")
+    coordinates = [sp.Symbol(reader.name(item, f"coordinates[{i}]")) for i, item in enumerate(coordinate_list)]
+    parameter_table = document.get("parameters", {})
+    if not isinstance(parameter_table, dict):
+        raise reader.error("parameters", f"expected a table, got {_kind(parameter_table)}")
+    parameters = [sp.Symbol(reader.name(key, f"parameters.{key}")) for key in parameter_table]
+    reader.symbols = {s.name: s for s in (*coordinates, *map(speed_symbol, coordinates), *parameters, t)}
+    values, units = _read_parameters(reader, parameter_table, {s.name: s for s in parameters})
+    gravity = reader.vector(document["gravity"], "gravity", (2, 3)) if "gravity" in document else None
+    with reader.entry("coordinates, parameters, gravity"):
+        system = System(coordinates, parameters=parameters, gravity=gravity, name=name)
+
+    points = document.get("points", {})
+    if not isinstance(points, dict):
+        raise reader.error("points", f"expected a table of named points, got {_kind(points)}")
+    for key, value in points.items():
+        reader.add_point(key, reader.vector(value, f"points.{key}", (2, 3)), f"points.{key}")
+
+    _read_items(reader, system, document)
+    model = ModelFile(system=system, description=description, values=values, units=units, source=source)
+    _read_settings(reader, document, model)
+    with reader.entry("parameters"):
+        model.numeric_values()
+    with reader.entry("initial"):
+        model.guess_vectors()
+    return model
+
+
+
+def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
+                     ) -> tuple[dict[str, sp.Expr], dict[str, str]]:
+    """Values converted to SI base units (``300`` with unit ``"mm"`` is 0.3, unit ``"m"``;
+    ``90 deg`` is pi/2 rad); the units returned are the SI ones, so that writing the file
+    back and reading it again gives the same numbers."""
+    values: dict[str, sp.Expr] = {}
+    units: dict[str, str] = {}
+    for key, item in table.items():
+        entry = f"parameters.{key}"
+        factor = None
+        if isinstance(item, dict):
+            reader.table(item, entry, optional=("value", "unit", "description"))
+            if "unit" in item:
+                try:
+                    one, units[key] = si_unit(reader.string(item["unit"], f"{entry}.unit"))
+                except ValueError as error:
+                    raise reader.error(f"{entry}.unit", str(error)) from None
+                factor = one.magnitude
+            if "description" in item:
+                reader.string(item["description"], f"{entry}.description")
+            if "value" not in item:
+                continue
+            entry, item = f"{entry}.value", item["value"]
+        value = reader.expression(item, entry, symbols)
+        if key in {s.name for s in value.free_symbols}:
+            raise reader.error(entry, "the value refers to the parameter itself")
+        if factor is not None and factor != 1:
+            if value.free_symbols:
+                raise reader.error(entry, f"a value computed from other parameters uses their SI values, so its "
+                                          f"unit must be the SI unit {units[key]!r}")
+            value = value * sp.Float(factor)
+        values[key] = value
+    return values, units
+
+
+def _body(reader: _Reader, entry: str, table: dict) -> PlanarBody | RigidBody | PointMass:
+    kind = reader.string(table.get("type", ""), f"{entry}.type")
+    if kind not in _BODY_TYPES:
+        raise reader.error(f"{entry}.type", f"expected one of {', '.join(_BODY_TYPES)}, got {kind!r}")
+    fields = {"planar": ("inertia", "angle"), "rigid": ("inertia", "rotation"), "point": ()}[kind]
+    reader.table(table, entry, required=("name", "type", "mass", "position", *fields),
+                 optional=("points", "simplify") if kind == "rigid" else ("points",))
+    name = reader.string(table["name"], f"{entry}.name")
+    mass = reader.expression(table["mass"], f"{entry}.mass")
+    with reader.entry(entry):
+        if kind == "planar":
+            return PlanarBody(name, mass=mass, inertia=reader.expression(table["inertia"], f"{entry}.inertia"),
+                              position=reader.point(table["position"], f"{entry}.position", (2,)),
+                              angle=reader.expression(table["angle"], f"{entry}.angle"))
+        if kind == "point":
+            return PointMass(name, mass=mass, position=reader.point(table["position"], f"{entry}.position"))
+        simplify = table.get("simplify", True)
+        if not isinstance(simplify, bool):
+            raise reader.error(f"{entry}.simplify", f"expected true or false, got {_kind(simplify)}")
+        return RigidBody(name, mass=mass, inertia=_inertia_tensor(reader, table["inertia"], f"{entry}.inertia"),
+                         position=reader.point(table["position"], f"{entry}.position", (3,)),
+                         rotation=_rotation(reader, table["rotation"], f"{entry}.rotation"), simplify=simplify)
+
+
+def _inertia_tensor(reader: _Reader, value, entry: str) -> sp.Matrix:
+    """A 3x3 tensor, or 3 principal moments on the diagonal."""
+    if isinstance(value, list) and len(value) == 3 and not any(isinstance(row, list) for row in value):
+        return sp.diag(*reader.vector(value, entry, (3,)))
+    return sp.Matrix(reader.matrix(value, entry, 3, 3))
+
+
+def _rotation(reader: _Reader, value, entry: str) -> sp.Matrix | RotationSequence:
+    """A 3x3 matrix, or ``{axes = "zxz", angles = [...]}``: ``R = R_a1(angle1) R_a2(angle2) ...``
+    (a :class:`~kronlag.system.RotationSequence`, at most ``MAX_ROTATION_FACTORS`` axes)."""
+    if not isinstance(value, dict):
+        return sp.Matrix(reader.matrix(value, entry, 3, 3))
+    reader.table(value, entry, required=("axes", "angles"))
+    axes = reader.string(value["axes"], f"{entry}.axes")
+    if not axes or any(axis not in "xyz" for axis in axes):
+        raise reader.error(f"{entry}.axes", f"expected a sequence of the letters x, y, z, got {axes!r}")
+    if len(axes) > MAX_ROTATION_FACTORS:
+        raise reader.error(f"{entry}.axes", f"{len(axes)} elementary rotations; at most {MAX_ROTATION_FACTORS} "
+                                            "are allowed")
+    angles = reader.vector(value["angles"], f"{entry}.angles", (len(axes),))
+    with reader.entry(entry):
+        return RotationSequence(list(zip(axes, angles)))
+
+
+def _read_items(reader: _Reader, system: System, document: dict) -> None:
+    """Bodies, constraints, force elements and drawing, in file order within each kind."""
+    for entry, table in reader.tables(document, "bodies", required=("name", "type", "mass", "position"),
+                                      optional=("inertia", "angle", "rotation", "simplify", "points")):
+        body = _body(reader, entry, table)
+        with reader.entry(entry):
+            system.add_body(body)
+        _read_body_points(reader, system, table.get("points", {}), body.name, f"{entry}.points")
+    _read_joints(reader, system, document)
+    scalar_items: list[tuple[str, Callable]] = [
+        ("constraints", system.add_constraint),
+        ("nonholonomic_constraints", system.add_nonholonomic_constraint),
+        ("potentials", system.add_potential),
+    ]
+    for key, add in scalar_items:
+        for entry, table in reader.tables(document, key, required=("expression",), optional=("name",)):
+            expression = reader.expression(table["expression"], f"{entry}.expression")
+            with reader.entry(entry):
+                add(expression, name=_optional_name(reader, table, entry))
+    for entry, table in reader.tables(document, "springs", required=("point_a", "point_b", "stiffness"),
+                                      optional=("name", "free_length")):
+        with reader.entry(entry):
+            system.add_spring(reader.point(table["point_a"], f"{entry}.point_a"),
+                              reader.point(table["point_b"], f"{entry}.point_b"),
+                              stiffness=reader.expression(table["stiffness"], f"{entry}.stiffness"),
+                              free_length=reader.expression(table.get("free_length", 0), f"{entry}.free_length"),
+                              name=_optional_name(reader, table, entry))
+    for entry, table in reader.tables(document, "dampers", required=("point_a", "point_b", "coefficient"),
+                                      optional=("name",)):
+        with reader.entry(entry):
+            system.add_damper(reader.point(table["point_a"], f"{entry}.point_a"),
+                              reader.point(table["point_b"], f"{entry}.point_b"),
+                              coefficient=reader.expression(table["coefficient"], f"{entry}.coefficient"),
+                              name=_optional_name(reader, table, entry))
+    for entry, table in reader.tables(document, "forces", required=("point", "force"), optional=("name",)):
+        point = reader.point(table["point"], f"{entry}.point")
+        with reader.entry(entry):
+            system.add_force(point, reader.vector(table["force"], f"{entry}.force", (len(point),)),
+                             name=_optional_name(reader, table, entry))
+    for entry, table in reader.tables(document, "torques", required=("body", "torque"), optional=("name", "frame")):
+        value = table["torque"]
+        torque = (reader.vector(value, f"{entry}.torque", (3,)) if isinstance(value, list)
+                  else reader.expression(value, f"{entry}.torque"))
+        with reader.entry(entry):
+            system.add_torque(reader.string(table["body"], f"{entry}.body"), torque,
+                              frame=reader.string(table.get("frame", "world"), f"{entry}.frame"),
+                              name=_optional_name(reader, table, entry))
+    m = len(system.coordinates)
+    for entry, table in reader.tables(document, "generalized_forces", required=("force",), optional=("name",)):
+        force = reader.vector(table["force"], f"{entry}.force", (m,))
+        with reader.entry(entry):
+            system.add_generalized_force(force, name=_optional_name(reader, table, entry))
+    for entry, table in reader.tables(document, "drawing", required=("points",), optional=("name",)):
+        points = table["points"]
+        if not isinstance(points, list):
+            raise reader.error(f"{entry}.points", f"expected a list of points, got {_kind(points)}")
+        vertices = [reader.point(point, f"{entry}.points[{i}]") for i, point in enumerate(points)]
+        with reader.entry(entry):
+            system.add_drawing_line(vertices, name=_optional_name(reader, table, entry))
+    for entry, table in reader.tables(document, "traces", required=("point",), optional=("name",)):
+        point = reader.point(table["point"], f"{entry}.point")
+        with reader.entry(entry):
+            system.add_trace(point, name=_optional_name(reader, table, entry))
+
+
+def _read_body_points(reader: _Reader, system: System, table, body: str, entry: str) -> None:
+    """``points = {name = [body coordinates], ...}`` of a body: system points, and named points of the file."""
+    if not isinstance(table, dict):
+        raise reader.error(entry, f"expected a table of named points, got {_kind(table)}")
+    for key, value in table.items():
+        if key in reader.points:
+            raise reader.error(f"{entry}.{key}", f"the point name {key!r} is used twice")
+        local = reader.vector(value, f"{entry}.{key}", (system.dimension,))
+        with reader.entry(f"{entry}.{key}"):
+            point = system.add_point(key, body, local)
+        reader.add_point(key, list(point.position), f"{entry}.{key}")
+
+
+def _read_joints(reader: _Reader, system: System, document: dict) -> None:
+    dimension = system.dimension
+    for entry, table in reader.tables(document, "joints", required=("type", "body_a", "body_b"),
+                                      optional=("name", "at_a", "at_b", "axis", "axis_b", "angle", "rotation")):
+        options: dict[str, Any] = {}
+        for key in ("at_a", "at_b"):
+            if key in table:
+                value = table[key]
+                options[key] = value if isinstance(value, str) else reader.vector(value, f"{entry}.{key}",
+                                                                                  (dimension,))
+        for key in ("axis", "axis_b"):
+            if key in table:
+                options[key] = reader.vector(table[key], f"{entry}.{key}", (dimension,))
+        if "angle" in table:
+            options["angle"] = reader.expression(table["angle"], f"{entry}.angle")
+        if "rotation" in table:
+            options["rotation"] = _rotation(reader, table["rotation"], f"{entry}.rotation")
+        with reader.entry(entry):
+            system.add_joint(reader.string(table["type"], f"{entry}.type"),
+                             reader.string(table["body_a"], f"{entry}.body_a"),
+                             reader.string(table["body_b"], f"{entry}.body_b"),
+                             name=_optional_name(reader, table, entry), **options)
+
+
+def _optional_name(reader: _Reader, table: dict, entry: str) -> str | None:
+    return reader.string(table["name"], f"{entry}.name") if "name" in table else None
+
+
+def _read_settings(reader: _Reader, document: dict, model: ModelFile) -> None:
+    """``[initial]``, ``[simulation]`` and ``[[drives]]``."""
+    names = [q.name for q in model.system.coordinates]
+    parameter_symbols = {s.name: s for s in model.system.parameters}
+    initial = reader.table(document.get("initial", {}), "initial", optional=("q", "fixed", "qd", "qd_fixed"))
+    for key, target in (("q", model.q_guess), ("qd", model.qd_guess)):
+        guesses = reader.table(initial.get(key, {}), f"initial.{key}", optional=names)
+        target.update({name: reader.expression(value, f"initial.{key}.{name}", parameter_symbols)
+                       for name, value in guesses.items()})
+    model.fixed = reader.names(initial.get("fixed", []), "initial.fixed", known=names)
+    model.qd_fixed = reader.names(initial.get("qd_fixed", []), "initial.qd_fixed", known=names)
+
+    settings = reader.table(document.get("simulation", {}), "simulation",
+                            optional=("t_end", "method", "rtol", "atol"))
+    defaults = SimulationSettings()
+    model.simulation = SimulationSettings(
+        t_end=reader.number(settings.get("t_end", defaults.t_end), "simulation.t_end", positive=True),
+        method=reader.string(settings.get("method", defaults.method), "simulation.method"),
+        rtol=reader.number(settings.get("rtol", defaults.rtol), "simulation.rtol", positive=True),
+        atol=reader.number(settings.get("atol", defaults.atol), "simulation.atol", positive=True))
+
+    drive_symbols = {**parameter_symbols, "t": t}
+    for entry, table in reader.tables(document, "drives", required=("motion",),
+                                      optional=("coordinate", "target", "name")):
+        if ("coordinate" in table) == ("target" in table):
+            raise reader.error(entry, "give either coordinate (a coordinate name) or target (an expression of "
+                                      "the coordinates, e.g. a point's end_effector_x), not both or neither")
+        if "coordinate" in table:
+            coordinate = reader.string(table["coordinate"], f"{entry}.coordinate")
+            if coordinate not in names:
+                raise reader.error(f"{entry}.coordinate", f"unknown coordinate {coordinate!r}; "
+                                                          f"coordinates are {', '.join(names)}")
+            target = reader.symbols[coordinate]
+        else:
+            target = reader.expression(table["target"], f"{entry}.target")
+            if not target.free_symbols & set(model.system.coordinates) or t in target.free_symbols:
+                raise reader.error(f"{entry}.target", "must be an expression of the coordinates (not of t: "
+                                                      "the motion gives the time dependence)")
+        name = (reader.string(table["name"], f"{entry}.name") if "name" in table else drive_name(target))
+        if name in model.drives:
+            raise reader.error(entry, f"the drive {name!r} is given twice")
+        model.drives[name] = PrescribedMotion(target, reader.expression(table["motion"], f"{entry}.motion",
+                                                                        drive_symbols))
+
+
+def loads_model(text: str, *, source: str = "<string>") -> ModelFile:
+    """Read a model from TOML text; ``source`` names it in error messages."""
+    try:
+        document = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ModelFileError(f"{source}: not valid TOML: {error}") from None
+    return _read(document, source)
+
+
+def load_model(path: str | Path) -> ModelFile:
+    """Read a model file (TOML; the format is described in the module docstring).
+
+    Raises
+    ------
+    ModelError
+        The file cannot be read or is invalid; the message names the file, the
+        entry and the problem.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise ModelFileError(f"{path}: cannot read the file: {error}") from None
+    return loads_model(text, source=str(path))

@@ -1,0 +1,222 @@
+"""Writing model files: a :class:`~kronlag.model.modelfile.model_file.ModelFile` (or a bare
+:class:`~kronlag.model.system.System`) as TOML text that reads back to the same model."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import sympy as sp
+from sympy.printing.str import StrPrinter
+
+from ...core.errors import ExpressionError, ModelError
+from ..bodies import PlanarBody, PointMass, RigidBody
+from ..expressions import parse_expression
+from ..symbols import t
+from ..system import System
+from .model_file import ModelFile
+
+__all__ = ["to_toml", "dump_model"]
+
+
+class _FilePrinter(StrPrinter):
+    """Prints expressions in the model-file syntax."""
+
+    def _print_Abs(self, expr) -> str:
+        return f"abs({self._print(expr.args[0])})"
+
+    def _print_Exp1(self, expr) -> str:
+        return "exp(1)"
+
+    def _print_Float(self, expr) -> str:
+        return repr(float(expr))
+
+
+class _Writer:
+    def __init__(self, system: System):
+        self.printer = _FilePrinter()
+        self.symbols = {s.name: s for s in (*system.coordinates, *system.speeds, *system.parameters, t)}
+
+    def expression(self, value) -> int | float | str:
+        expr = sp.sympify(value)
+        if expr.is_Integer:
+            return int(expr)
+        if expr.is_Float:
+            return float(expr)
+        text = self.printer.doprint(expr)
+        try:
+            parsed = parse_expression(text, self.symbols)
+        except ExpressionError:
+            parsed = None
+        # Reading may regroup a rational factor over a sum: the same expression, other tree.
+        readable = parsed is not None and (parsed == expr or sp.expand(parsed - expr) == 0)
+        if not readable:
+            raise ModelError(f"cannot write the expression {expr} in the model-file syntax")
+        return text
+
+    def vector(self, matrix) -> list:
+        return [self.expression(entry) for entry in matrix]
+
+    def matrix(self, matrix: sp.MatrixBase) -> list:
+        return [self.vector(matrix.row(i)) for i in range(matrix.rows)]
+
+
+def _document(model: ModelFile) -> dict[str, Any]:
+    """The TOML document of a model as nested dicts and lists."""
+    system = model.system
+    writer = _Writer(system)
+    document: dict[str, Any] = {"name": system.name}
+    if model.description:
+        document["description"] = model.description
+    document["coordinates"] = [q.name for q in system.coordinates]
+    if system.gravity is not None:
+        document["gravity"] = writer.vector(system.gravity)
+    parameters = {}
+    for symbol in system.parameters:
+        entry = {}
+        if symbol.name in model.values:
+            entry["value"] = writer.expression(model.values[symbol.name])
+        if symbol.name in model.units:
+            entry["unit"] = model.units[symbol.name]
+        parameters[symbol.name] = entry
+    document["parameters"] = parameters
+    points = {body: {name: writer.vector(point.local) for name, point in system.points.items() if point.body == body}
+              for body in ("ground", *(body.name for body in system.bodies))}
+    if points["ground"]:
+        document["points"] = points["ground"]
+    document["bodies"] = [_body_document(writer, body) for body in system.bodies]
+    for entry in document["bodies"]:
+        if points[entry["name"]]:
+            entry["points"] = points[entry["name"]]
+    document["joints"] = [{"name": joint.name, "type": joint.kind, "body_a": joint.body_a, "body_b": joint.body_b,
+                           **{key: writer.expression(value) if key == "angle" else
+                              writer.matrix(value) if key == "rotation" else writer.vector(value)
+                              for key, value in joint.geometry}} for joint in system.joints]
+    joint_rows = {row for joint in system.joints for row in joint.constraint_names}
+    for key, items in (("constraints", [c for c in system.constraints if c.name not in joint_rows]),
+                       ("nonholonomic_constraints", system.nonholonomic_constraints),
+                       ("potentials", system.potentials)):
+        document[key] = [{"name": item.name, "expression": writer.expression(item.expression)} for item in items]
+    document["springs"] = [{"name": s.name, "point_a": writer.vector(s.point_a), "point_b": writer.vector(s.point_b),
+                            "stiffness": writer.expression(s.stiffness),
+                            "free_length": writer.expression(s.free_length)} for s in system.springs]
+    document["dampers"] = [{"name": d.name, "point_a": writer.vector(d.point_a), "point_b": writer.vector(d.point_b),
+                            "coefficient": writer.expression(d.coefficient)} for d in system.dampers]
+    kinds = {"point": "forces", "body torque": "torques", "generalized": "generalized_forces"}
+    for key in kinds.values():
+        document[key] = []
+    for force in system.forces:
+        entry: dict[str, Any] = {"name": force.name}
+        if force.kind == "point":
+            entry.update(point=writer.vector(force.where), force=writer.vector(force.value))
+        elif force.kind == "generalized":
+            entry["force"] = writer.vector(force.value)
+        else:
+            torque = writer.vector(force.value)
+            entry.update(body=force.where, torque=torque[0] if len(torque) == 1 else torque)
+            if force.frame != "world":
+                entry["frame"] = force.frame
+        document[kinds[force.kind]].append(entry)
+    document["initial"] = {"q": {k: writer.expression(v) for k, v in model.q_guess.items()},
+                           "fixed": list(model.fixed),
+                           "qd": {k: writer.expression(v) for k, v in model.qd_guess.items()},
+                           "qd_fixed": list(model.qd_fixed)}
+    settings = model.simulation
+    document["simulation"] = {"t_end": settings.t_end, "method": settings.method,
+                              "rtol": settings.rtol, "atol": settings.atol}
+    document["drives"] = [
+        {"name": name, **({"coordinate": drive.target.name} if drive.target in system.coordinates
+                          else {"target": writer.expression(drive.target)}),
+         "motion": writer.expression(drive.motion)}
+        for name, drive in model.drives.items()]
+    document["drawing"] = [{"name": line.name, "points": [writer.vector(p) for p in line.points]}
+                           for line in system.drawing]
+    document["traces"] = [{"name": trace.name, "point": writer.vector(trace.points[0])} for trace in system.traces]
+    return document
+
+
+def _body_document(writer: _Writer, body: PlanarBody | RigidBody | PointMass) -> dict[str, Any]:
+    kind = {PlanarBody: "planar", RigidBody: "rigid", PointMass: "point"}[type(body)]
+    entry: dict[str, Any] = {"name": body.name, "type": kind, "mass": writer.expression(body.mass)}
+    if isinstance(body, PlanarBody):
+        entry["inertia"] = writer.expression(body.inertia)
+    elif isinstance(body, RigidBody):
+        entry["inertia"] = writer.matrix(body.inertia)
+    entry["position"] = writer.vector(body.position)
+    if isinstance(body, PlanarBody):
+        entry["angle"] = writer.expression(body.angle)
+    elif isinstance(body, RigidBody):
+        entry.update(rotation=_rotation_document(writer, body), simplify=body.simplify)
+    return entry
+
+
+def _rotation_document(writer: _Writer, body: RigidBody) -> list | dict[str, Any]:
+    """``{axes, angles}`` for a sequence of rotations about x, y, z; else the matrix."""
+    sequence = body.rotation_sequence
+    names = {(1, 0, 0): "x", (0, 1, 0): "y", (0, 0, 1): "z"}
+    if sequence is not None and all(tuple(axis) in names for axis, _ in sequence.factors):
+        return {"axes": "".join(names[tuple(axis)] for axis, _ in sequence.factors),
+                "angles": [writer.expression(angle) for _, angle in sequence.factors]}
+    return writer.matrix(body.rotation)
+
+
+_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def _toml_key(key: str) -> str:
+    return key if _BARE_KEY.match(key) else json.dumps(key, ensure_ascii=False)
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(item) for item in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + "}"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def _is_table_array(value) -> bool:
+    return isinstance(value, list) and bool(value) and all(isinstance(item, dict) for item in value)
+
+
+def _emit(document: dict[str, Any]) -> str:
+    """TOML text: top-level values first, then ``[tables]`` and ``[[arrays of tables]]`` in
+    document order; empty lists are left out."""
+    lines = [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in document.items()
+             if not isinstance(v, dict) and not _is_table_array(v) and v != []]
+    for key, value in document.items():
+        if isinstance(value, dict):
+            lines += ["", f"[{_toml_key(key)}]"]
+            lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items() if v != []]
+        elif _is_table_array(value):
+            for item in value:
+                lines += ["", f"[[{_toml_key(key)}]]"] + [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in item.items()]
+    return "\n".join(lines) + "\n"
+
+
+def to_toml(model: ModelFile | System) -> str:
+    """The model-file text of a model (a bare :class:`System` is written without numbers).
+
+    Raises
+    ------
+    ModelError
+        An expression uses a function the file syntax does not have.
+    """
+    if isinstance(model, System):
+        model = ModelFile(system=model)
+    return _emit(_document(model))
+
+
+def dump_model(model: ModelFile | System, path: str | Path) -> None:
+    """Write :func:`to_toml` of ``model`` to ``path``."""
+    Path(path).write_text(to_toml(model), encoding="utf-8")

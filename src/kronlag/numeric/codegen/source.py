@@ -1,0 +1,114 @@
+"""The expressions of an :class:`~kronlag.symbolic.equations.Equations` object, prepared once for
+both backends: the kernels of :data:`~kronlag.numeric.codegen.layouts.LAYOUTS`, of every matrix of the
+catalogue (:mod:`kronlag.symbolic.matrices`) and of further expressions (points, reactions)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
+
+import symengine as se
+import sympy as sp
+
+from ...core.kernels import Block, ExpressionConverter, Kernel, cse_kernel
+from ...symbolic import matrices
+from .layouts import LAYOUTS
+
+if TYPE_CHECKING:
+    from ...symbolic.equations import Equations
+
+__all__ = ["KernelSource"]
+
+#: Kernels computed here rather than read off the equations.
+_COMPUTED = frozenset({"potential_energy", "h", "K", "D"})
+
+
+class KernelSource:
+    """The expressions of an :class:`Equations` object, prepared for code generation.
+
+    Shared by both backends.  :meth:`kernel` returns a :class:`~kronlag.core.kernels.Kernel` for a
+    kernel of :data:`LAYOUTS` (``"dynamics"``, ``"tangent"``) or a matrix of the catalogue
+    :data:`kronlag.symbolic.matrices.MATRICES`; :meth:`expression_kernel` for further expressions.
+    The inputs are renamed ``t``, ``q[i]``, ``qd[i]`` and ``p[i]`` (the parameters, then any extra
+    inputs of an expression kernel).
+
+    Parameters
+    ----------
+    equations : Equations
+    """
+
+    def __init__(self, equations: Equations):
+        self.equations = equations
+        self.m = equations.shape[0]
+        renames = {equations.time: se.Symbol("t")}
+        for prefix, symbols in (("q", equations.coordinates), ("qd", equations.speeds),
+                                ("p", equations.parameters)):
+            renames.update({symbol: se.Symbol(f"{prefix}[{i}]") for i, symbol in enumerate(symbols)})
+        self.convert = ExpressionConverter(renames)
+        self.q = [renames[symbol] for symbol in equations.coordinates]
+        self.qd = [renames[symbol] for symbol in equations.speeds]
+        self._cache: dict[str, list[list[se.Basic]]] = {}
+
+    # -- matrices as nested lists of SymEngine expressions --------------------
+
+    def matrix(self, name: str) -> list[list[se.Basic]]:
+        """Matrix ``name`` as rows of SymEngine expressions (vectors as (n, 1))."""
+        if name not in self._cache:
+            self._cache[name] = self._compute(name)
+        return self._cache[name]
+
+    def _compute(self, name: str) -> list[list[se.Basic]]:
+        eq = self.equations
+        if name not in matrices.MATRICES:
+            raise KeyError(name)
+        if name not in _COMPUTED:
+            return self.convert.matrix(getattr(eq, name), name)
+        if name == "potential_energy":
+            return [[self.convert.entry(sp.sympify(eq.potential_energy), "potential energy")]]
+        if name == "h":
+            return [[f[0] - c[0] - g[0]] for f, c, g in
+                    zip(self.matrix("f_Q"), self.matrix("Cqd"), self.matrix("g"))]
+        variables = self.q if name == "K" else self.qd
+        return [[se.diff(entry, variable) for variable in variables] for entry in self._dynamic_residual()]
+
+    def _dynamic_residual(self) -> list[se.Basic]:
+        """``e = M a + C qd + g - f_Q + Phi_q^T nu + A^T mu`` with the accelerations ``a`` and the
+        multipliers ``nu``, ``mu`` read from ``p`` after the parameters: ``p[P + i]`` is ``a_i``,
+        ``p[P + m + j]`` is ``nu_j``, ``p[P + m + r + k]`` is ``mu_k`` (the "tangent" kernel)."""
+        m, r, s = self.equations.shape
+        extra = [se.Symbol(f"p[{len(self.equations.parameters) + i}]") for i in range(m + r + s)]
+        a, nu, mu = extra[:m], extra[m:m + r], extra[m + r:]
+        M, h, Phi_q, A = (self.matrix(name) for name in ("M", "h", "Phi_q", "A"))
+        return [se.Add(*(M[i][j] * a[j] for j in range(m)), -h[i][0],
+                       *(Phi_q[k][i] * nu[k] for k in range(r)), *(A[k][i] * mu[k] for k in range(s)))
+                for i in range(m)]
+
+    # -- kernels -------------------------------------------------------------------
+
+    def kernel(self, name: str) -> Kernel:
+        """The kernel ``name`` with common subexpressions eliminated (``symengine.cse``)."""
+        names = LAYOUTS.get(name, (name,))
+        blocks = tuple(Block(block, _rows_and_columns(block, self.equations.shape)) for block in names)
+        return cse_kernel(name, blocks, [self.matrix(block) for block in names], self.convert.constants)
+
+    def expression_kernel(self, name: str, expressions: Mapping[str, sp.MatrixBase],
+                          extra: Sequence[sp.Symbol] = ()) -> Kernel:
+        """A kernel of further expressions of ``(t, q, qd, parameters, extra)`` (body points, joint
+        reactions, the Jacobians of a linearization), one block per entry of ``expressions``; the
+        ``extra`` symbols are read from ``p`` after the parameters."""
+        converter = self.convert
+        if extra:
+            offset = len(self.equations.parameters)
+            converter = ExpressionConverter({**{symbol: value for symbol, value in self.convert.memo.items()
+                                                if isinstance(symbol, sp.Symbol)},
+                                             **{symbol: se.Symbol(f"p[{offset + i}]")
+                                                for i, symbol in enumerate(extra)}})
+        blocks = tuple(Block(block, matrix.shape) for block, matrix in expressions.items())
+        converted = [converter.matrix(matrix, block) for block, matrix in expressions.items()]
+        return cse_kernel(name, blocks, converted, converter.constants)
+
+
+def _rows_and_columns(name: str, shape: tuple[int, int, int]) -> tuple[int, int]:
+    """The (rows, columns) of catalogue matrix ``name`` (a vector is (n, 1))."""
+    numpy_shape = matrices.shape(name, *shape)
+    return (numpy_shape[0], numpy_shape[1] if len(numpy_shape) == 2 else 1)

@@ -1,0 +1,114 @@
+"""The numerical policy of kronlag, in one place: rank decisions on the constraint Jacobian.
+
+Every method that needs the rank of ``G = [Phi_q; A]`` -- forward dynamics (the
+augmented solve, in Python and in the generated C), the projections onto the
+constraint manifold, :meth:`~kronlag.NumericModel.assemble` and the detection
+of singular configurations during a simulation -- decides it the same way:
+
+* the diagonal of ``R`` in a column-pivoted QR of ``G^T`` (C) or the singular
+  values of ``G`` (Python), sorted by size, are compared with the largest;
+* an entry ``<= rank_rtol`` times the largest counts as zero (a dependent,
+  redundant constraint row);
+* while integrating, the ratio of the smallest entry that should be nonzero
+  (at the rank of the start) to the largest falls like ``|t - t*|`` near a
+  *singular configuration*, where ``Phi_q`` loses rank at an instant (IFToMM
+  A02: all bars horizontal).  Below ``APPROACH_RTOL`` (condition number above
+  20) the motion *approaches* one: the index-1 methods, which cannot tell the
+  branches apart there, stop with status -1, and the switching method hands
+  over to the index-3 method (ALI3-P), which passes it on its branch.  A local
+  minimum of the sampled ratio below ``APPROACH_RTOL`` is a *passage*,
+  recorded as an event in the :class:`~kronlag.Trajectory`.
+
+The projections onto the constraint manifold (:mod:`kronlag.numeric.projection` in Python,
+``kl_project`` in the compiled integrator) stop after :data:`MAX_PROJECTION_ITERATIONS`
+Gauss-Newton steps, or earlier at a step at rounding level (:data:`STALL`).
+
+The C code receives the same numbers as macros (:func:`c_macros`), generated
+from this module, so the two cannot disagree.
+
+Why ``RANK_RTOL = 1e-8`` by default: an integrator's states lie off the
+constraint manifold by its local error (``1e-10`` to ``1e-6`` with the Baumgarte
+methods at the default tolerances); the singular value of a redundant
+(dependent) row off the manifold is of that size relative to the largest, so a
+threshold at rounding level (``1e-10`` and below) declares such states full
+rank and the accelerations blow up (IFToMM A04).  A threshold far above the
+drift but far below the smallest singular value of a regular mechanism keeps
+both right; pass ``rank_rtol`` to ``eom.numeric`` for badly scaled models.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.errors import InputError
+
+__all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
+           "STALL", "numerical_rank", "check_rank_rtol", "rank_magnitudes", "singular_ratio", "c_macros"]
+
+#: Default relative rank tolerance on ``[Phi_q; A]`` (see the module docstring).
+RANK_RTOL = 1e-8
+#: A Cholesky pivot ``<= CHOLESKY_RTOL * max(diag)`` of ``Z^T M Z`` means M is not positive
+#: definite on the constraint null space: a singular configuration.
+CHOLESKY_RTOL = 1e-12
+#: The largest ``rank_rtol`` allowed: a magnitude ratio of 1e-3 (condition number 1e3) is still
+#: a rank, to be passed by the integrators, not a redundant row.
+MAX_RANK_RTOL = 1e-3
+#: A ratio below this: the motion approaches a singular configuration (condition number above 20).
+APPROACH_RTOL = 0.05
+#: The switching method returns from the index-3 method to the fast one above this ratio.
+LEAVE_RTOL = 2 * APPROACH_RTOL
+#: Most Gauss-Newton steps of one projection onto ``Phi(q, t) = 0`` during an integration.
+MAX_PROJECTION_ITERATIONS = 8
+#: A Gauss-Newton step below ``STALL (1 + |q|)`` in every coordinate is at rounding level: ``Phi`` is as
+#: small as it gets, and the projection ends there.
+STALL = 1e-15
+
+
+def check_rank_rtol(rank_rtol: float) -> float:
+    """``rank_rtol`` as a float in ``(0, MAX_RANK_RTOL)``; ValueError otherwise."""
+    value = float(rank_rtol)
+    if not 0.0 < value < MAX_RANK_RTOL:
+        raise InputError(f"rank_rtol must lie in (0, {MAX_RANK_RTOL:g}), got {rank_rtol!r}")
+    return value
+
+
+def numerical_rank(magnitudes: np.ndarray, rank_rtol: float) -> int:
+    """Number of ``magnitudes`` (singular values or ``|diag R|``) above ``rank_rtol`` times the largest."""
+    magnitudes = np.abs(np.asarray(magnitudes, dtype=float))
+    if magnitudes.size == 0 or not magnitudes.max() > 0.0:
+        return 0
+    return int(np.count_nonzero(magnitudes > rank_rtol * magnitudes.max()))
+
+
+def rank_magnitudes(Phi_q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``|diag R|`` of the column-pivoted QR of ``Phi_q^T`` (decreasing) and the constraint row
+    behind each: the rank-revealing magnitudes (``rank_magnitudes`` in ``numeric/codegen/c/linalg.c``)."""
+    from scipy.linalg import qr
+
+    if Phi_q.shape[0] == 0:
+        return np.zeros(0), np.zeros(0, dtype=int)
+    R, permutation = qr(Phi_q.T, mode="r", pivoting=True)
+    steps = min(Phi_q.shape)
+    magnitudes = np.zeros(Phi_q.shape[0])
+    magnitudes[:steps] = np.abs(np.diag(R)[:steps])
+    return magnitudes, permutation
+
+
+def singular_ratio(Phi_q: np.ndarray, generic_rank: int) -> tuple[float, int]:
+    """``magnitude[rho - 1] / magnitude[0]`` of :func:`rank_magnitudes` (1 when there is nothing to
+    lose) and the constraint row behind it (-1 then): falls like ``|t - t*|`` near a singular
+    configuration (``kl_singular_ratio`` in ``simulation/c/monitor.c``)."""
+    if generic_rank == 0:
+        return 1.0, -1
+    magnitudes, permutation = rank_magnitudes(Phi_q)
+    ratio = magnitudes[generic_rank - 1] / magnitudes[0] if magnitudes[0] > 0 else 0.0
+    return float(ratio), int(permutation[generic_rank - 1])
+
+
+def c_macros(rank_rtol: float) -> str:
+    """The policy as C macros for the generated code."""
+    return (f"#define KRONLAG_RANK_RTOL {rank_rtol!r}\n#define KRONLAG_CHOLESKY_RTOL {CHOLESKY_RTOL!r}\n"
+            f"#define KRONLAG_APPROACH_RTOL {APPROACH_RTOL!r}\n"
+            f"#define KRONLAG_LEAVE_RTOL {LEAVE_RTOL!r}\n"
+            f"#define KRONLAG_MAX_PROJECTION_ITERATIONS {MAX_PROJECTION_ITERATIONS}\n"
+            f"#define KRONLAG_STALL {STALL!r}\n")

@@ -1,0 +1,177 @@
+"""The problem and the solution of a time integration, and the interface every solver implements.
+
+The layout follows ``scipy.integrate`` and diffrax: a :class:`MultibodyProblem`
+(the model, the time span, the initial state), a :class:`Solver` class per method
+(each declares its formulation and order; :mod:`kronlag.simulation.solvers`) and a
+:class:`Solution` of raw states are separate types joined by one driver,
+:func:`kronlag.simulation.simulate`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from ..core.errors import ProjectionError
+from ..numeric.projection import project_positions, project_velocities
+from .trajectory import Result, SingularPassage
+
+if TYPE_CHECKING:
+    from ..numeric.numeric_model import NumericModel
+
+__all__ = ["MultibodyProblem", "Solution", "SolverOptions", "Solver"]
+
+
+@dataclass(frozen=True, eq=False)
+class MultibodyProblem:
+    """Initial-value problem for ``y = [q, qd]`` (length 2 m) on ``[t0, t1]``.
+
+    Attributes
+    ----------
+    model : NumericModel
+    t0, t1 : float
+    q0, qd0 : (m,)
+        Initial state (projected onto the constraints by :func:`simulate`).
+    t_eval : (K,) or None
+        Output times in ``[t0, t1]``, increasing; ``None``: every accepted step.
+    alpha, beta : float
+        Baumgarte parameters of :meth:`rhs`.
+    """
+
+    model: NumericModel
+    t0: float
+    t1: float
+    q0: np.ndarray
+    qd0: np.ndarray
+    t_eval: np.ndarray | None
+    alpha: float
+    beta: float
+
+    @property
+    def m(self) -> int:
+        return self.model.m
+
+    @property
+    def y0(self) -> np.ndarray:
+        """``[q0, qd0]``, shape (2 m,)."""
+        return np.concatenate([self.q0, self.qd0])
+
+    def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+        """Index-1 right-hand side ``[qd, qdd]`` with Baumgarte stabilization, shape (2 m,).
+
+        ``qdd`` solves ``[[M, Phi_q^T, A^T], [Phi_q, 0, 0], [A, 0, 0]] [qdd; lam; mu] =
+        [f_Q - C qd - g; gamma - 2 alpha (Phi_q qd + Phi_t) - beta^2 Phi; gamma_nh - alpha (A qd + b)]``.
+        """
+        q, qd = y[:self.m], y[self.m:]
+        result = self.model.forward_dynamics(q, qd, t, alpha=self.alpha, beta=self.beta)
+        return np.concatenate([qd, result.qdd])
+
+    def project(self, t: float, y: np.ndarray, tol: float) -> np.ndarray:
+        """Project ``y = [q, qd]`` onto the constraint manifold, shape (2 m,).
+
+        Positions by Gauss-Newton on ``Phi(q, t) = 0`` until ``max |Phi| <= tol`` or a step is at
+        rounding level, then velocities onto ``B qd + c = 0`` with ``B = [Phi_q; A]`` (r + s, m)
+        and ``c = [Phi_t; b]`` in one step (:mod:`kronlag.numeric.projection`, minimum-norm
+        corrections over the independent rows: redundant constraints keep working).
+
+        Raises
+        ------
+        ProjectionError
+            If the Gauss-Newton iteration does not converge (the residual is in the error).
+        """
+        m = self.m
+        positions = project_positions(self.model, y[:m], t, tol=tol)
+        if not positions.accepted(tol):
+            raise ProjectionError(f"the position projection did not converge at t = {t!r}, "
+                                  f"q = {positions.q.tolist()}: max |Phi| = {positions.residual:.3g} after "
+                                  f"{positions.iterations} Gauss-Newton steps (tol {tol:.3g})", positions.residual)
+        return np.concatenate([positions.q, project_velocities(self.model, positions.q, y[m:], t)])
+
+
+@dataclass(frozen=True, eq=False)
+class Solution:
+    """Raw solver output: states ``y = [q, qd]`` at the output times.
+
+    Attributes
+    ----------
+    t : (N,)
+    y : (N, 2 m)
+    result : Result
+        How it ended (on failure ``t``, ``y`` hold what was computed before it).
+    message : str
+    nfev, njev, steps : int
+        Right-hand-side or residual evaluations, Jacobian evaluations, accepted steps.
+    derived : dict or None
+        ``qdd`` (N, m), ``lam`` (N, r), ``mu`` (N, s), ``kinetic_energy`` (N,),
+        ``potential_energy`` (N,), ``position_residual`` (N, r), ``velocity_residual``
+        (N, r + s) at the outputs, when the solver computed them (else :func:`simulate` does).
+    events : tuple of SingularPassage
+        Singular configurations passed.
+    """
+
+    t: np.ndarray
+    y: np.ndarray
+    result: Result
+    message: str
+    nfev: int
+    njev: int
+    steps: int
+    derived: dict[str, np.ndarray] | None = None
+    events: tuple[SingularPassage, ...] = ()
+
+    @property
+    def status(self) -> int:
+        """0 success, -1 failure (``result.status``)."""
+        return self.result.status
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Options common to every solver (see :func:`simulate`)."""
+
+    rtol: float
+    atol: float
+    max_step: float
+    max_steps: int
+    progress: Callable[[float], object] | None
+
+    @property
+    def projection_tol(self) -> float:
+        """Residual tolerance of the position projection: ``atol / 100``."""
+        return self.atol / 100
+
+
+class Solver(ABC):
+    """A time-integration method for a :class:`MultibodyProblem`.
+
+    Subclasses declare ``name``, ``formulation`` (the equations integrated),
+    ``order`` and, where they need more than any model, ``requirements`` and
+    :meth:`supports`, and implement :meth:`solve`.
+    """
+
+    name: ClassVar[str]
+    formulation: ClassVar[str]
+    order: ClassVar[str]
+    #: What a model needs for this method (said when :meth:`supports` is False).
+    requirements: ClassVar[str] = "nothing"
+    #: Default Baumgarte ``alpha`` and ``beta`` of the index-1 ODE it integrates (0: none).
+    stabilization: ClassVar[float] = 0.0
+
+    @staticmethod
+    def supports(model: NumericModel) -> bool:
+        """Whether the method can integrate ``model``."""
+        return True
+
+    def __init__(self, options: SolverOptions):
+        self.options = options
+
+    @abstractmethod
+    def solve(self, problem: MultibodyProblem) -> Solution:
+        """Integrate ``problem``; failures are reported in the solution, not raised."""
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(formulation={self.formulation!r}, order={self.order!r})"

@@ -1,0 +1,234 @@
+"""The driver: :func:`simulate` joins a :class:`~kronlag.simulation.problem.MultibodyProblem`, a solver
+of :data:`~kronlag.simulation.solvers.METHODS` and the derived quantities into a
+:class:`~kronlag.simulation.trajectory.Trajectory`."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from contextlib import suppress
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..core.errors import AssemblyError, InitialStateWarning, InputError, SingularConfigurationError
+from ..numeric.linalg import velocity_constraints
+from .problem import MultibodyProblem, Solution, SolverOptions
+from .solvers import AUTO_PREFERENCE, METHODS
+from .trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from ..numeric.numeric_model import NumericModel
+
+__all__ = ["simulate"]
+
+
+def _output_times(t_eval: Sequence[float] | np.ndarray | None, t0: float, t1: float) -> np.ndarray | None:
+    if t_eval is None:
+        return None
+    times = np.asarray(t_eval, dtype=float).ravel()
+    if times.size == 0:
+        raise InputError("t_eval is empty: give at least one output time (or None for every step)")
+    if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0) or times[0] < t0 or times[-1] > t1:
+        raise InputError(f"t_eval must increase strictly and lie in t_span = [{t0}, {t1}]")
+    return times
+
+
+def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray) -> dict[str, np.ndarray]:
+    """The :attr:`Solution.derived` arrays at ``states`` (N, 2 m), by the model's Python interface
+    (NaN accelerations and multipliers where the configuration is singular)."""
+    m, r, s = model.m, model.r, model.s
+    n = len(times)
+    derived = {"qdd": np.full((n, m), np.nan), "lam": np.full((n, r), np.nan), "mu": np.full((n, s), np.nan),
+               "kinetic_energy": np.empty(n), "position_residual": np.empty((n, r)),
+               "velocity_residual": np.empty((n, r + s))}
+    for k, (t, y) in enumerate(zip(times, states)):
+        q, qd = y[:m], y[m:]
+        with suppress(SingularConfigurationError):  # the state a failed integration ended in
+            result = model.forward_dynamics(q, qd, t)
+            derived["qdd"][k], derived["lam"][k], derived["mu"][k] = result.qdd, result.lam, result.mu
+        terms = model.dynamics_terms(q, qd, t)
+        derived["kinetic_energy"][k] = 0.5 * qd @ terms["M"] @ qd
+        derived["position_residual"][k] = terms["Phi"]
+        B, c = velocity_constraints(terms)
+        derived["velocity_residual"][k] = B @ qd + c
+    return derived
+
+
+def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, started: float) -> Trajectory:
+    """The :class:`Trajectory` of ``solution``, with the derived quantities at its output times."""
+    model, m = problem.model, problem.m
+    derived = dict(solution.derived if solution.derived is not None else _derived(model, solution.t, solution.y))
+    if "potential_energy" not in derived:
+        derived["potential_energy"] = np.array([model.potential_energy(y[:m], t)
+                                                for t, y in zip(solution.t, solution.y)])
+    return Trajectory(t=solution.t, q=solution.y[:, :m], qd=solution.y[:, m:], **derived,
+                      coordinate_names=tuple(model.coordinate_names), model=model,
+                      method=method, message=solution.message, nfev=solution.nfev,
+                      njev=solution.njev, steps=solution.steps, wall_time=time.perf_counter() - started,
+                      events=solution.events, result=solution.result)
+
+
+def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, method: str = "auto",
+             rtol: float = 1e-8, atol: float = 1e-10, t_eval=None, alpha: float | None = None,
+             beta: float | None = None, max_step: float | None = None, max_steps: int | None = None,
+             progress: Callable[[float], object] | None = None) -> Trajectory:
+    r"""Integrate the equations of motion of ``model`` over ``t_span``.
+
+    The model is the differential-algebraic system (Van Khang 2011, Eq. 23)::
+
+        M(q) qdd + C(q, qd) qd + Phi_q^T lam + A^T mu + g(q) = f_Q
+        Phi(q) = 0,   A(q) qd + b(q) = 0
+
+    with m coordinates ``q``, r holonomic and s nonholonomic constraints.
+
+    Parameters
+    ----------
+    model : NumericModel
+        From ``eom.numeric(parameters)``.
+    t_span : (t0, t1)
+        Time interval, ``t1 > t0``.
+    q0, qd0 : array_like, shape (m,)
+        Initial coordinates and velocities.  They should satisfy the
+        constraints (``model.assemble`` finds such values); they are projected
+        onto ``Phi(q, t0) = 0``, ``Phi_q qd + Phi_t = 0``, ``A qd + b = 0`` before starting.
+    method : {'auto', 'switching', 'ali3p', 'compiled', 'baumgarte', 'projection', 'ggl'}
+        Formulation and integrator:
+
+        ``'switching'``
+            ``'compiled'`` away from singular configurations, ``'ali3p'``
+            through them (and throughout when the constraints are redundant at
+            the start) (:class:`SwitchingSolver`);
+        ``'ali3p'``
+            index-3 augmented Lagrangian with mass-orthogonal projections,
+            trapezoidal rule, compiled (:class:`Index3Solver`): passes singular
+            configurations and handles redundant constraints;
+
+        ``'baumgarte'``
+            index-1 ODE ``[q, qd]' = [qd, qdd]`` with ``qdd`` from
+            ``model.forward_dynamics(q, qd, t, alpha=alpha, beta=beta)``
+            (constraint violations obey ``e'' + 2 alpha e' + beta^2 e = 0``),
+            scipy's DOP853 (:class:`BaumgarteSolver`);
+        ``'projection'``
+            the same ODE without stabilization, projected onto the constraint
+            manifold after every accepted DOP853 step (:class:`ProjectionSolver`);
+        ``'ggl'``
+            stabilized index-2 Gear-Gupta-Leimkuhler DAE by SUNDIALS IDA
+            (:class:`GGLSolver`);
+        ``'compiled'``
+            the Baumgarte ODE by SUNDIALS CVODE (Adams) in compiled code,
+            outputs projected (:class:`CompiledSolver`; needs a model with the
+            C backend and no time-varying parameter);
+        ``'auto'``
+            the first of :data:`AUTO_PREFERENCE` (``'switching'``,
+            ``'compiled'``, ``'projection'``) that the model allows.
+
+        The index-1 methods stop with status -1 at the approach to a singular
+        configuration, where they cannot tell the branches of the motion apart.
+    rtol, atol : float
+        Relative and absolute local error tolerances.
+    t_eval : array_like, shape (K,), optional
+        Increasing output times within ``t_span``; by default every accepted step.
+    alpha, beta : float, optional
+        Baumgarte parameters (units 1/time).  Default: the method's
+        ``stabilization`` (10 for ``'baumgarte'``, ``'compiled'`` and the CVODE
+        part of ``'switching'``, 0 for ``'projection'``, which removes the drift);
+        unused by ``'ggl'`` and ``'ali3p'``.
+    max_step : float, optional
+        Largest step size (unbounded by default).
+    max_steps : int, optional
+        Most accepted steps; reaching it ends the integration with status -1.  By
+        default 1000 per unit of simulated time, at least 100 000.
+    progress : callable, optional
+        Called as ``progress(t)`` after every accepted step.
+
+    Returns
+    -------
+    Trajectory
+        ``t`` (N,), ``q``, ``qd``, ``qdd`` (N, m), ``lam`` (N, r), ``mu`` (N, s),
+        energies, residuals ``Phi(q)`` (N, r) and ``[Phi_q qd; A qd + b]``
+        (N, r + s), counters, wall time and ``events`` (the singular
+        configurations passed).  On failure (a singular
+        configuration, an integrator error, ``max_steps``) ``status`` is -1,
+        ``message`` says why, and the arrays hold the solution up to the failure.
+
+    Examples
+    --------
+    >>> model = kronlag.derive(kronlag.models.four_bar()).numeric(parameters)  # doctest: +SKIP
+    >>> q0, qd0 = model.assemble([0.5, 1.0, 2.0], fixed={"q1": 0.5})          # doctest: +SKIP
+    >>> trajectory = kronlag.simulate(model, (0, 10), q0, qd0)                # doctest: +SKIP
+    """
+    started = time.perf_counter()
+    t0, t1 = (float(value) for value in t_span)
+    if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
+        raise InputError(f"t_span must be finite with t1 > t0, got {t_span!r}")
+    for label, value in (("rtol", rtol), ("atol", atol)):
+        if not (np.isfinite(value) and value > 0):
+            raise InputError(f"{label} must be a positive number, got {value!r}")
+    if max_step is not None and not float(max_step) > 0:
+        raise InputError(f"max_step must be positive, got {max_step!r}")
+    span_steps = max(100_000, int(np.ceil(_STEPS_PER_TIME * (t1 - t0))))
+    if max_steps is None:
+        max_steps = span_steps
+    if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 1):
+        raise InputError(f"max_steps must be an integer >= 1, got {max_steps!r}")
+    name = _resolve_method(method, model)
+    default_stabilization = METHODS[name].stabilization
+    options = SolverOptions(rtol=rtol, atol=atol, max_step=np.inf if max_step is None else float(max_step),
+                            max_steps=int(max_steps), progress=progress)
+    start = MultibodyProblem(model=model, t0=t0, t1=t1, q0=np.asarray(q0, dtype=float).ravel(),
+                             qd0=np.asarray(qd0, dtype=float).ravel(), t_eval=_output_times(t_eval, t0, t1),
+                             alpha=default_stabilization if alpha is None else float(alpha),
+                             beta=default_stabilization if beta is None else float(beta))
+    for label, value in (("q0", start.q0), ("qd0", start.qd0)):
+        if value.shape != (model.m,):
+            raise InputError(f"{label} must have {model.m} entries ({', '.join(model.coordinate_names)}), "
+                             f"got {value.size}")
+        bad = [model.coordinate_names[i] for i in np.flatnonzero(~np.isfinite(value))]
+        if bad:
+            raise InputError(f"{label} is not finite for {', '.join(bad)}")
+    problem = replace(start, **dict(zip(("q0", "qd0"), _consistent_start(start, options))))
+    solution = METHODS[name](options).solve(problem)
+    return _trajectory(solution, problem, name, started)
+
+
+#: The default ``max_steps``: this many per unit of simulated time, at least 100 000.
+_STEPS_PER_TIME = 1000
+
+
+#: An initial state whose projection onto the constraints moves ``q`` by more than this (relative to
+#: ``1 + |q0|``) is refused: the projection may have jumped to another assembly branch.
+_MAX_START_CORRECTION = 1e-3
+
+
+#: Corrections of the initial state below this (relative) are the rounding of its assembly: no warning.
+_ROUNDING = 1e-9
+
+
+def _consistent_start(problem: MultibodyProblem, options: SolverOptions) -> tuple[np.ndarray, np.ndarray]:
+    """``(q0, qd0)`` projected onto the constraints; a warning states any correction above ``atol``,
+    and a correction of ``q0`` above :data:`_MAX_START_CORRECTION` is an :class:`AssemblyError`."""
+    m = problem.m
+    y0 = problem.project(problem.t0, problem.y0, options.projection_tol)
+    dq, dqd = (float(np.max(np.abs(x), initial=0.0)) for x in (y0[:m] - problem.q0, y0[m:] - problem.qd0))
+    scale = 1.0 + float(np.max(np.abs(problem.q0), initial=0.0))
+    if dq > _MAX_START_CORRECTION * scale:
+        raise AssemblyError(f"the initial state violates the constraints (max |Phi| = "
+                            f"{np.max(np.abs(problem.model.Phi(problem.q0, problem.t0)), initial=0.0):.3g}): "
+                            f"projecting it would move q by {dq:.3g}, perhaps onto another assembly branch; "
+                            "assemble it with model.assemble(q_guess, fixed=...)", dq)
+    speed = 1.0 + float(np.max(np.abs(problem.qd0), initial=0.0))
+    if dq > max(options.atol, _ROUNDING * scale) or dqd > max(options.atol, _ROUNDING * speed):
+        warnings.warn(f"the initial state violated the constraints and was projected onto them: q moved by "
+                      f"{dq:.3g}, qd by {dqd:.3g} (max abs)", InitialStateWarning, stacklevel=3)
+    return y0[:m], y0[m:]
+
+
+def _resolve_method(method: str, model: NumericModel) -> str:
+    if method == "auto":
+        return next(name for name in AUTO_PREFERENCE if METHODS[name].supports(model))
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose from 'auto', {', '.join(map(repr, METHODS))}")
+    return method

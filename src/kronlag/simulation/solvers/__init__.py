@@ -1,0 +1,30 @@
+"""The integration methods, one a module, each a :class:`~kronlag.simulation.problem.Solver` subclass
+that declares its formulation and order; :data:`METHODS` names them for ``simulate(method=...)``."""
+
+from __future__ import annotations
+
+from ..problem import Solver
+from .ali3p import Index3Solver
+from .baumgarte import BaumgarteSolver
+from .compiled import CompiledSolver
+from .ggl import GGLSolver
+from .projection import ProjectionSolver
+from .switching import SwitchingSolver
+
+__all__ = ["METHODS", "AUTO_PREFERENCE", "BaumgarteSolver", "ProjectionSolver", "GGLSolver", "CompiledSolver",
+           "Index3Solver", "SwitchingSolver"]
+
+
+#: Methods by name (``"auto"`` picks among them in :func:`simulate`).
+METHODS: dict[str, type[Solver]] = {
+    BaumgarteSolver.name: BaumgarteSolver,
+    ProjectionSolver.name: ProjectionSolver,
+    GGLSolver.name: GGLSolver,
+    CompiledSolver.name: CompiledSolver,
+    Index3Solver.name: Index3Solver,
+    SwitchingSolver.name: SwitchingSolver,
+}
+
+
+#: What ``method="auto"`` picks: the first of these that supports the model.
+AUTO_PREFERENCE = (SwitchingSolver.name, CompiledSolver.name, ProjectionSolver.name)

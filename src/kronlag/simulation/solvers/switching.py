@@ -1,0 +1,55 @@
+"""The switching method: CVODE away from singular configurations, ALI3-P through them (the default)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ...numeric.tolerances import numerical_rank
+from ..drivers import Segment, require, segment_status, solution_of
+from ..problem import MultibodyProblem, Solution, Solver
+from .ali3p import Index3Solver, index3_segment
+from .compiled import CompiledSolver, cvode_segment
+
+__all__ = ["SwitchingSolver"]
+
+
+class SwitchingSolver(Solver):
+    """CVODE (:class:`CompiledSolver`) away from singular configurations, ALI3-P
+    (:class:`Index3Solver`) through them; the default.
+
+    The fast high-order method integrates while ``Phi_q`` is well conditioned; at
+    the approach to a singular configuration (:data:`kronlag.tolerances.APPROACH_RTOL`)
+    the index-3 method takes over from the projected state and passes it on the
+    branch the motion is on; once the motion is clear of it
+    (:data:`~kronlag.tolerances.LEAVE_RTOL`) CVODE continues.  A model whose
+    constraints are redundant at the start (``Phi_q`` rank deficient) is integrated
+    by ALI3-P throughout.  Smooth problems cost what :class:`CompiledSolver` costs.
+    """
+
+    name = "switching"
+    formulation = "CVODE on the Baumgarte ODE; ALI3-P near singular configurations (both compiled)"
+    order = "1-12 (Adams-Moulton) away from singular configurations, 2 (trapezoidal) near them"
+    requirements = Index3Solver.requirements
+    supports = staticmethod(Index3Solver.supports)
+    stabilization = CompiledSolver.stabilization
+
+    def solve(self, problem: MultibodyProblem) -> Solution:
+        require(self, problem.model)
+        model, options = problem.model, self.options
+        redundant = model.r and numerical_rank(np.linalg.svd(model.Phi_q(problem.q0, problem.t0),
+                                                             compute_uv=False), model.rank_rtol) < model.r
+        segments: list[Segment] = []
+        t, y, index3 = problem.t0, problem.y0, bool(redundant)
+        while True:
+            steps_left = options.max_steps - sum(segment.steps for segment in segments)
+            budget = replace(options, max_steps=max(steps_left, 0))
+            if index3:
+                segment = index3_segment(problem, budget, t, y, handback=not redundant)
+            else:
+                segment = cvode_segment(problem, budget, t, y)
+            segments.append(segment.without_first_row() if segments and problem.t_eval is None else segment)
+            if segment.flag <= 0:
+                return solution_of(segments, *segment_status(segment, model, "index3" if index3 else "cvode"))
+            t, y, index3 = segment.t_end, segment.y_end, not index3

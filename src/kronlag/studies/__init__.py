@@ -1,0 +1,3 @@
+"""Studies on a numeric model: kinematics and inverse dynamics along drives (:mod:`.drives`), static
+equilibrium (:mod:`.equilibrium`), linearization and modes (:mod:`.linearization`, with the exact Jacobians
+of :mod:`.tangent`) and parameter sweeps (:mod:`.sweeps`)."""

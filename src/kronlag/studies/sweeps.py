@@ -1,0 +1,348 @@
+"""Parameter sweeps: many simulations of one model, on a Dask cluster.
+
+:func:`sweep` runs one simulation per case -- a set of parameter values and
+initial coordinates or speeds, from a grid or a list of samples -- on the
+workers of a :class:`dask.distributed.Client` (a local cluster of processes by
+default) and gathers a :class:`pandas.DataFrame` of scalar outcomes, one row
+per case.  The model is built once: each worker unpickles it once and makes
+every case with :meth:`~kronlag.numeric.NumericModel.with_parameters` (no code
+generated or compiled per case).  A case that fails keeps its row, with its
+status and message; a task lost with a dying worker is run again elsewhere.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import math
+import pickle
+import sys
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..core.errors import InputError
+from ..numeric.numeric_model import NumericModel
+from ..simulation.simulate import simulate
+
+if TYPE_CHECKING:
+    import pandas
+
+    from ..simulation.trajectory import Trajectory
+
+__all__ = ["sweep", "SweepResult", "grid", "DEFAULT_OUTCOMES"]
+
+
+def _final_coordinates(trajectory: Trajectory) -> dict[str, float]:
+    return {f"{name}_final": float(value) for name, value in zip(trajectory.coordinate_names, trajectory.q[-1])}
+
+
+def _energy_drift(trajectory: Trajectory) -> float:
+    energy = trajectory.kinetic_energy + trajectory.potential_energy
+    return float(np.max(np.abs(energy - energy[0])))
+
+
+def _max_position_residual(trajectory: Trajectory) -> float:
+    residual = trajectory.position_residual
+    return float(np.max(np.abs(residual))) if residual.size else 0.0
+
+
+#: Outcomes recorded when none are given: ``name -> f(trajectory)``; a function returning a
+#: dict contributes one column per key.
+DEFAULT_OUTCOMES: dict[str, Callable] = {
+    "final": _final_coordinates,
+    "energy_drift": _energy_drift,
+    "max_position_residual": _max_position_residual,
+}
+
+_STATUS_OK, _STATUS_FAILED, _STATUS_ERROR, _STATUS_LOST = "ok", "failed", "error", "lost"
+
+
+def grid(**axes: Sequence[float]) -> list[dict[str, float]]:
+    """All combinations of the values of each named axis (the last name varies fastest).
+
+    >>> grid(m2=[1.0, 2.0], q1d=[0.0, 3.0])
+    [{'m2': 1.0, 'q1d': 0.0}, {'m2': 1.0, 'q1d': 3.0}, {'m2': 2.0, 'q1d': 0.0}, {'m2': 2.0, 'q1d': 3.0}]
+    """
+    names = list(axes)
+    return [dict(zip(names, (float(value) for value in values)))
+            for values in itertools.product(*(axes[name] for name in names))]
+
+
+@dataclass(frozen=True, eq=False)
+class SweepResult:
+    """What :func:`sweep` gathered.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        One row per case, in the order of the cases: ``case``, the swept values,
+        ``status`` (``"ok"``; ``"failed"``: the integrator stopped; ``"error"``: an
+        exception, e.g. no consistent initial state; ``"lost"``: the task could not be
+        run, e.g. its workers kept dying), ``message``, the outcomes and
+        ``wall_time`` (s, in the worker).
+    trajectories : dict of int -> Trajectory, or None
+        With ``keep_trajectories=True``: the trajectory of every case that ran.
+    """
+
+    table: pandas.DataFrame
+    trajectories: dict[int, Trajectory] | None = None
+
+    @property
+    def failed(self) -> pandas.DataFrame:
+        """The rows whose status is not ``"ok"``."""
+        return self.table[self.table["status"] != _STATUS_OK]
+
+    def to_xarray(self):
+        """The kept trajectories as an :class:`xarray.Dataset` with dimensions ``case``, ``time``,
+        ``coordinate`` (variables ``q``, ``qd``; the cases' scalar columns as coordinates of
+        ``case``).  Needs xarray and ``keep_trajectories=True`` with a common ``t_eval``."""
+        try:
+            import xarray as xr
+        except ImportError as error:
+            raise ImportError("SweepResult.to_xarray needs xarray: pip install xarray") from error
+        if not self.trajectories:
+            raise InputError("no trajectories kept: run the sweep with keep_trajectories=True")
+        cases = sorted(self.trajectories)
+        first = self.trajectories[cases[0]]
+        if any(len(self.trajectories[case].t) != len(first.t) or not np.allclose(self.trajectories[case].t, first.t)
+               for case in cases):
+            raise InputError("the trajectories have different output times: give t_eval to the sweep")
+        rows = self.table.set_index("case").loc[cases]
+        return xr.Dataset(
+            {"q": (("case", "time", "coordinate"), np.stack([self.trajectories[c].q for c in cases])),
+             "qd": (("case", "time", "coordinate"), np.stack([self.trajectories[c].qd for c in cases]))},
+            coords={"case": cases, "time": first.t, "coordinate": list(first.coordinate_names),
+                    **{column: ("case", rows[column].to_numpy()) for column in rows.columns}})
+
+
+# -- one case, in a worker ----------------------------------------------------------------------------
+
+#: Models unpickled in this process, by the hash of their pickle (a worker unpickles a model once).
+_MODELS: dict[str, Any] = {}
+
+
+def _unpickled(token: str, payload: bytes):
+    model = _MODELS.get(token)
+    if model is None:
+        model = _MODELS[token] = pickle.loads(payload)
+    return model
+
+
+def _run_case(source, values: Mapping[str, float], settings: Mapping[str, Any]) -> tuple[dict, Trajectory | None]:
+    """Simulate one case; never raises (a failure becomes the row's status and message)."""
+
+    started = time.perf_counter()
+    row: dict[str, Any] = {}
+    trajectory = None
+    try:
+        if isinstance(source, NumericModel):
+            state = _state_names(source)
+            model = source.with_parameters({k: v for k, v in values.items() if k not in state})
+        else:
+            model = source(dict(values))
+        q0, qd0 = _initial_state(model, values, settings)
+        trajectory = simulate(model, settings["t_span"], q0, qd0, **settings["simulate"])
+        row["status"] = _STATUS_OK if trajectory.success else _STATUS_FAILED
+        row["message"] = trajectory.message
+        for name, outcome in settings["outcomes"].items():
+            value = outcome(trajectory)
+            row.update(value if isinstance(value, Mapping) else {name: float(value)})
+    except Exception as error:  # a case's failure is data, reported in its row
+        row.update(status=_STATUS_ERROR, message=f"{type(error).__name__}: {error}")
+    row["wall_time"] = time.perf_counter() - started
+    return row, trajectory if settings["keep_trajectories"] else None
+
+
+def _state_names(model: NumericModel) -> dict[str, tuple[str, str]]:
+    """Swept names that set the initial state: ``"q1" -> ("q", "q1")``, ``"q1d" -> ("qd", "q1")``."""
+    names = {name: ("q", name) for name in model.coordinate_names}
+    names.update({f"{name}d": ("qd", name) for name in model.coordinate_names})
+    return names
+
+
+def _initial_state(model: NumericModel, values: Mapping[str, float], settings: Mapping[str, Any]):
+    """``(q0, qd0)``: the given state, or the guess with swept coordinates/speeds held, assembled."""
+    initial = settings["initial_states"]
+    if callable(initial):
+        return initial(model, dict(values))
+    q, qd = (np.array(x, dtype=float) for x in initial)
+    fixed = {name: q[i] for i, name in enumerate(model.coordinate_names) if name in settings["fixed"]}
+    qd_fixed = {name: qd[i] for i, name in enumerate(model.coordinate_names) if name in settings["qd_fixed"]}
+    held, state = {"q": fixed, "qd": qd_fixed}, _state_names(model)
+    for name, value in values.items():
+        if name in state:
+            kind, coordinate = state[name]
+            held[kind][coordinate] = value
+    if not fixed and not qd_fixed and not settings["assemble"]:
+        return q, qd
+    return model.assemble(q, fixed=fixed or None, qd_guess=qd, qd_fixed=qd_fixed or None)
+
+
+def _run_batch(token: str, payload: bytes, cases: list[tuple[int, dict]], settings_payload: bytes) -> list:
+    """The task sent to a worker: a batch of cases of one model."""
+    source = _unpickled(token, payload)
+    settings = _unpickled(hashlib.sha256(settings_payload).hexdigest(), settings_payload)
+    return [(index, *_run_case(source, values, settings)) for index, values in cases]
+
+
+# -- the sweep ------------------------------------------------------------------------------------------
+
+
+def _cases(parameters) -> list[dict[str, float]]:
+    """Cases from a grid (mapping name -> values), a list of dicts, or a DataFrame (one case a row)."""
+    if isinstance(parameters, Mapping):
+        return grid(**parameters)
+    if hasattr(parameters, "to_dict") and hasattr(parameters, "columns"):
+        return [{k: float(v) for k, v in row.items()} for row in parameters.to_dict("records")]
+    cases = [dict(case) for case in parameters]
+    if not all(isinstance(case, dict) for case in cases):
+        raise InputError("parameters must be a mapping name -> values (a grid), a list of dicts or a DataFrame")
+    return cases
+
+
+def _check_names(source, cases: list[dict]) -> None:
+    if not isinstance(source, NumericModel):
+        return
+    known = set(source.parameter_names) | set(_state_names(source))
+    unknown = sorted({name for case in cases for name in case} - known)
+    if unknown:
+        raise InputError(f"unknown swept name(s) {', '.join(unknown)}: expected parameters "
+                         f"({', '.join(source.parameter_names)}), coordinates ({', '.join(source.coordinate_names)}) "
+                         f"or speeds ({', '.join(n + 'd' for n in source.coordinate_names)})")
+
+
+class _TextProgress:
+    """``[#####.....] done/total cases`` on standard error (a terminal only), at most 10 redraws/s."""
+
+    def __init__(self, total: int, stream=sys.stderr, width: int = 30):
+        self.total, self.stream, self.width, self.drawn = total, stream, width, 0.0
+        self.enabled = hasattr(stream, "isatty") and stream.isatty()
+
+    def __call__(self, done: int, total: int) -> None:
+        now = time.monotonic()
+        if not self.enabled or (now - self.drawn < 0.1 and done < total):
+            return
+        self.drawn = now
+        filled = self.width * done // max(total, 1)
+        self.stream.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {done}/{total} cases")
+        if done == total:
+            self.stream.write("\n")
+        self.stream.flush()
+
+
+def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, parameters,
+          initial_states, t_span: tuple[float, float], outcomes: Mapping[str, Callable] | None = None,
+          client=None, workers: int = 2, fixed: Iterable[str] = (), qd_fixed: Iterable[str] = (),
+          assemble: bool = True, keep_trajectories: bool = False, batch_size: int | None = None,
+          retries: int = 3, progress: bool | Callable[[int, int], None] = True,
+          **simulate_options) -> SweepResult:
+    """Simulate every case of a grid or sample of parameter values and initial states.
+
+    Parameters
+    ----------
+    model_or_factory : NumericModel or callable
+        A built model (each case is ``model.with_parameters(case)``: no new code), or
+        ``factory(case: dict) -> NumericModel`` for cases that change the equations.
+        Either is pickled (cloudpickle) and unpickled once per worker.
+    parameters : mapping name -> values, list of dicts, or pandas.DataFrame
+        A mapping is a grid (every combination, :func:`grid`); a list or a frame gives
+        the cases one by one.  A name is a parameter, a coordinate (``q1``: its
+        initial value, held while assembling) or a speed (``q1d``).
+    initial_states : (q, qd) pair of (m,) arrays, or callable ``f(model, case) -> (q0, qd0)``
+        The initial guess, assembled for every case (``model.assemble``) holding
+        ``fixed``/``qd_fixed`` and the swept coordinates and speeds; or a function
+        returning the consistent state of a case.
+    t_span : (t0, t1)
+    outcomes : mapping name -> callable(Trajectory), optional
+        Scalar outcomes (a callable may return a dict: one column per key);
+        :data:`DEFAULT_OUTCOMES` (final coordinates, energy drift, constraint
+        residual) when omitted.  Must be picklable (cloudpickle: lambdas are).
+    client : dask.distributed.Client, optional
+        Where to run.  None: a local cluster of ``workers`` processes (one thread
+        each), closed at the end.
+    workers : int
+        Processes of the local cluster; 0 runs every case in this process (no Dask).
+    fixed, qd_fixed : coordinate names held while assembling every case.
+    assemble : bool
+        False: use ``initial_states`` as given (already consistent) when nothing is held.
+    keep_trajectories : bool
+        Also gather every trajectory (memory!); see :meth:`SweepResult.to_xarray`.
+    batch_size : int, optional
+        Cases per task (default: about 8 tasks per worker).  A task lost with its
+        worker is run again; ``retries`` more times when it raises.
+    progress : bool or callable ``f(done, total)``
+        True: a bar on standard error when it is a terminal.
+    **simulate_options
+        Passed to :func:`kronlag.simulate` (``method``, ``rtol``, ``atol``, ``t_eval``, ...).
+
+    Returns
+    -------
+    SweepResult
+        ``table`` (a DataFrame, one row per case), ``trajectories``, ``failed``.
+    """
+    import pandas as pd
+
+    cases = _cases(parameters)
+    _check_names(model_or_factory, cases)
+    settings = {"t_span": tuple(t_span), "initial_states": initial_states, "fixed": set(fixed),
+                "qd_fixed": set(qd_fixed), "assemble": assemble, "outcomes": dict(outcomes or DEFAULT_OUTCOMES),
+                "keep_trajectories": keep_trajectories, "simulate": simulate_options}
+    report = progress if callable(progress) else _TextProgress(len(cases)) if progress else (lambda done, total: None)
+    results: dict[int, tuple[dict, Trajectory | None]] = {}
+    if client is None and workers == 0:
+        for index, values in enumerate(cases):
+            results[index] = _run_case(model_or_factory, values, settings)
+            report(len(results), len(cases))
+    else:
+        _run_distributed(model_or_factory, cases, settings, client, workers, batch_size, retries, report, results)
+    rows = []
+    for index, values in enumerate(cases):
+        row, _ = results[index]
+        rows.append({"case": index, **values, **row})
+    table = pd.DataFrame(rows)
+    leading = ["case", *dict.fromkeys(name for case in cases for name in case), "status", "message"]
+    table = table[leading + [column for column in table.columns if column not in leading]]
+    trajectories = ({index: trajectory for index, (_, trajectory) in results.items() if trajectory is not None}
+                    if keep_trajectories else None)
+    return SweepResult(table, trajectories)
+
+
+def _run_distributed(source, cases, settings, client, workers, batch_size, retries, report, results) -> None:
+    try:
+        import cloudpickle
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError as error:
+        raise ImportError("kronlag.sweep needs Dask: pip install 'dask[distributed]' (or kronlag[sweep]); "
+                          "workers=0 runs the cases in this process") from error
+    owned = None
+    if client is None:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        owned = client = Client(cluster)
+    try:
+        payload = cloudpickle.dumps(source)  # carries lambdas: factories, time-varying parameters
+        token = hashlib.sha256(payload).hexdigest()
+        settings_payload = cloudpickle.dumps(settings)
+        parallel = max(1, len(client.scheduler_info().get("workers", {})) or workers)
+        size = batch_size or max(1, math.ceil(len(cases) / (8 * parallel)))
+        batches = [list(enumerate(cases))[start:start + size] for start in range(0, len(cases), size)]
+        futures = {client.submit(_run_batch, token, payload, batch, settings_payload, pure=False,
+                                 retries=retries): batch for batch in batches}
+        for future in as_completed(futures):
+            batch = futures[future]
+            try:
+                for index, row, trajectory in future.result():
+                    results[index] = (row, trajectory)
+            except Exception as error:  # the task itself was lost (its workers kept dying)
+                for index, _ in batch:
+                    results[index] = ({"status": _STATUS_LOST, "message": f"{type(error).__name__}: {error}",
+                                       "wall_time": float("nan")}, None)
+            report(len(results), len(cases))
+    finally:
+        if owned is not None:
+            cluster = owned.cluster
+            owned.close()
+            cluster.close()

@@ -1,0 +1,449 @@
+"""Symbolic derivation of the equations of motion (Van Khang 2011, Section 3).
+
+The mass matrix is assembled from the body Jacobians (Eq. 12)::
+
+    M = sum_i (m_i J_Ti^T J_Ti + J_Ri^T I_i J_Ri)
+
+and the Coriolis matrix of Eq. 22::
+
+    C = dM/dq (I ⊗ qd) - 1/2 (dM/dq (qd ⊗ I))^T
+
+is computed without forming ``dM/dq`` or any Kronecker product.  Write every
+body term of ``M`` as ``J^T W J`` (``W = m_i I`` or ``I_i``).  Theorem 1 gives
+``Md = X + X^T`` with ``X = J^T W Jd`` and ``Jd = sum_k dJ/dq_k qd_k``, and
+Theorem 2 gives the second term row by row::
+
+    T2[i, :] = (sum_j dM_:j/dq_i qd_j)^T = (W v)^T dJ/dq_i + (W dJ/dq_i qd)^T J,   v = J qd
+
+so that ``C = Md - T2 / 2`` and the Christoffel form is
+``C_christoffel = (Md + T2^T - T2) / 2``.  All heavy algebra runs in SymEngine
+on plain symbols; the results are converted to SymPy once at the end.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Callable
+
+import symengine as se
+import sympy as sp
+from sympy.core.add import _addsort
+from sympy.core.mul import _mulsort
+
+from ..core.errors import InputError
+from ..model.bodies import PlanarBody, PointMass, RigidBody
+from ..model.symbols import t
+from ..model.system import System
+from .equations import Equations
+
+__all__ = ["derive"]
+
+
+def _se_matrix(matrix: sp.MatrixBase) -> se.DenseMatrix:
+    return se.DenseMatrix(matrix.rows, matrix.cols, [se.sympify(entry) for entry in matrix])
+
+
+class _SympyConverter:
+    """SymEngine -> SymPy, memoized so that a subexpression shared by many
+    entries (a sum of masses, a body velocity) is converted once.
+
+    SymEngine's sums and products are already canonical (like terms
+    collected, powers combined), so most nodes are built with SymPy's
+    ``_from_args`` in SymPy's canonical argument order, skipping the costly
+    ``flatten``; the cases where SymPy would still change the node (a number
+    times a sum, nested sums or products, several numbers) go through the
+    ordinary constructors.  The result is identical to ``sympy.sympify``.
+    """
+
+    def __init__(self, symbols: dict[str, sp.Symbol]):
+        self.memo: dict = {}
+        self.symbols = symbols  # by name: keeps the assumptions of the user's symbols
+
+    def __call__(self, expr):
+        result = self.memo.get(expr)
+        if result is None:
+            result = self._build(expr)
+            self.memo[expr] = result
+        return result
+
+    def _build(self, expr):
+        if isinstance(expr, se.Symbol) and expr.name in self.symbols:
+            return self.symbols[expr.name]
+        if not expr.args:
+            return expr._sympy_()
+        args = [self(arg) for arg in expr.args]
+        if isinstance(expr, se.Add):
+            return _canonical_add(args)
+        if isinstance(expr, se.Mul):
+            return _canonical_mul(args)
+        if isinstance(expr, se.Pow):
+            return sp.Pow(*args)
+        function = getattr(sp, type(expr).__name__, None)
+        if function is None:  # an undefined function f(q): let SymEngine convert it
+            return expr._sympy_()
+        return function(*args)
+
+    def matrix(self, matrix: se.DenseMatrix, shape: tuple[int, int]) -> sp.ImmutableMatrix:
+        """Convert ``matrix``; ``shape`` is given because SymEngine drops the column count of 0-row matrices."""
+        return sp.ImmutableMatrix(*shape, [self(entry) for entry in matrix])
+
+
+def _canonical_add(args: list) -> sp.Expr:
+    numbers = [arg for arg in args if arg.is_Number]
+    terms = [arg for arg in args if not arg.is_Number]
+    if len(numbers) > 1 or any(term.is_Add for term in terms):
+        return sp.Add(*args)
+    _addsort(terms)
+    return sp.Add._from_args(numbers + terms)
+
+
+def _canonical_mul(args: list) -> sp.Expr:
+    numbers = [arg for arg in args if arg.is_Number]
+    factors = [arg for arg in args if not arg.is_Number]
+    if (len(numbers) > 1 or numbers == [sp.S.One] or any(factor.is_Mul for factor in factors)
+            or (numbers and len(factors) == 1 and factors[0].is_Add)):
+        return sp.Mul(*args)
+    _mulsort(factors)
+    return sp.Mul._from_args(numbers + factors)
+
+
+def _jacobian(vector: se.DenseMatrix, variables: list) -> se.DenseMatrix:
+    return se.DenseMatrix(vector.rows, len(variables),
+                          [se.diff(vector[i], x) for i in range(vector.rows) for x in variables])
+
+
+def _vee(skew: se.DenseMatrix) -> list:
+    """Axial vector of a skew-symmetric 3x3 matrix."""
+    return [skew[2, 1], skew[0, 2], skew[1, 0]]
+
+
+#: Largest operation count of an entry of ``J_R`` that ``RigidBody(simplify=True)`` passes
+#: to ``trigsimp``; larger entries are kept unsimplified (trigsimp's cost grows too fast).
+TRIGSIMP_MAX_OPERATIONS = 45
+
+
+def _rotation_jacobian(body: RigidBody, q: list) -> se.DenseMatrix:
+    """``J_R`` with ``omega_body = J_R qd``.
+
+    For a :class:`~kronlag.system.RotationSequence` it is ``sum_k w_k d(angle_k)/dq``
+    (``w_k`` the axis of factor k in the body frame); for a matrix, column k is
+    ``vee(R^T dR/dq_k)`` (Theorem 1), with entries of at most
+    :data:`TRIGSIMP_MAX_OPERATIONS` operations trigsimp'd when ``body.simplify``.
+    """
+    if body.rotation_sequence is not None:
+        jacobian = se.zeros(3, len(q))
+        for axis, angle in body.rotation_sequence.body_axes():
+            angle_gradient = _jacobian(se.DenseMatrix(1, 1, [se.sympify(angle)]), q)
+            if any(not entry.is_zero for entry in angle_gradient):
+                jacobian += _se_matrix(axis) * angle_gradient
+        return jacobian
+    rotation = _se_matrix(body.rotation)
+    rotation_t = rotation.T
+    columns = [_vee(rotation_t * rotation.diff(qk)) for qk in q]
+    jacobian = se.DenseMatrix(3, len(q), [columns[k][i] for i in range(3) for k in range(len(q))])
+    if body.simplify:
+        jacobian = jacobian.applyfunc(_bounded_trigsimp)
+    return jacobian
+
+
+def _bounded_trigsimp(entry: se.Basic) -> se.Basic:
+    expr = sp.sympify(entry)
+    if sp.count_ops(expr) > TRIGSIMP_MAX_OPERATIONS:
+        return entry
+    return se.sympify(sp.trigsimp(expr))
+
+
+class _AlongSpeeds:
+    """Derivatives of expressions of ``q`` along the speeds: ``D x = sum_k dx/dq_k qd_k`` and
+    ``D2 x = sum_jk d2x/dq_j dq_k qd_j qd_k`` (``Jd qd`` for ``J = dx/dq``), by forward
+    differentiation over the expression graph, memoized per node.
+
+    Differentiating ``J`` by every coordinate and contracting twice with ``qd`` (Theorem 1) costs
+    a term per pair of coordinates; along ``qd`` each node is differentiated once, so the
+    acceleration of a link at the end of a chain in relative angles stays a sum over the links
+    (``-sum_a l_a cos(theta_a) omega_a^2``) instead of a sum over pairs of joints.
+    """
+
+    def __init__(self, q: list, qd: list):
+        self.speeds = dict(zip(q, qd))
+        self.memo: dict = {}
+
+    def __call__(self, expr: se.Basic) -> tuple[se.Basic, se.Basic]:
+        """``(D expr, D2 expr)``."""
+        result = self.memo.get(expr)
+        if result is None:
+            result = self.memo[expr] = self._build(expr)
+        return result
+
+    def _build(self, expr: se.Basic) -> tuple[se.Basic, se.Basic]:
+        zero = se.Integer(0)
+        if not expr.args:
+            return self.speeds.get(expr, zero), zero
+        if isinstance(expr, se.Add):
+            parts = [self(arg) for arg in expr.args]
+            return se.Add(*(first for first, _ in parts)), se.Add(*(second for _, second in parts))
+        if isinstance(expr, se.Mul):
+            value, (first, second) = expr.args[0], self(expr.args[0])
+            for factor in expr.args[1:]:
+                factor_first, factor_second = self(factor)
+                second = second * factor + 2 * first * factor_first + value * factor_second
+                first = first * factor + value * factor_first
+                value = value * factor
+            return first, second
+        if isinstance(expr, se.Pow) and self(expr.args[1]) == (zero, zero):
+            base, exponent = expr.args
+            base_first, base_second = self(base)
+            slope, curvature = exponent * base ** (exponent - 1), exponent * (exponent - 1) * base ** (exponent - 2)
+            return slope * base_first, curvature * base_first ** 2 + slope * base_second
+        if isinstance(expr, se.Function) and len(expr.args) == 1:
+            (argument,) = expr.args
+            argument_first, argument_second = self(argument)
+            dummy = se.Dummy()
+            slope = se.diff(expr.func(dummy), dummy)
+            curvature = se.diff(slope, dummy).subs({dummy: argument})
+            slope = slope.subs({dummy: argument})
+            return slope * argument_first, curvature * argument_first ** 2 + slope * argument_second
+        # anything else (a function of several arguments, a coordinate in an exponent): by coordinates
+        first = se.Add(*(se.diff(expr, q) * qd for q, qd in self.speeds.items()))
+        return first, se.Add(*(se.diff(first, q) * qd for q, qd in self.speeds.items()))
+
+
+def _weigh(weight, matrix: se.DenseMatrix) -> se.DenseMatrix:
+    """``W matrix`` for a square matrix weight ``W``; a scalar weight is kept apart (see _Accumulator)."""
+    return weight * matrix if isinstance(weight, se.DenseMatrix) else matrix
+
+
+class _Accumulator:
+    """Sums the body terms ``J^T W J`` of M together with ``Md`` and ``T2``.
+
+    A scalar weight (a mass or a planar inertia) is kept apart from the term it
+    multiplies, and terms that coincide are merged at the end: in a serial
+    chain many bodies share a Jacobian column, and ``(m_3 + m_4 + m_5) c`` is
+    far smaller than ``m_3 c + m_4 c + m_5 c``.  Each entry is summed once, at
+    the end: adding to a growing symbolic sum body by body would copy it.
+    """
+
+    def __init__(self, q: list, qd: list):
+        self.q, self.qd = q, qd
+        self.mass_terms: dict[tuple[int, int], list] = defaultdict(list)
+        self.mass_rate_terms: dict[tuple[int, int], list] = defaultdict(list)
+        self.second_terms: dict[tuple[int, int], list] = defaultdict(list)
+        self.velocity_terms: dict[tuple[int, int], list] = defaultdict(list)
+
+    def add(self, jacobian: se.DenseMatrix, weight, bias: se.DenseMatrix, *, gradient: bool = True) -> None:
+        """Add ``J^T W J``; ``weight`` is a scalar or a symmetric square matrix ``W``.
+
+        ``bias`` is ``Jd qd`` (a column, the rows of ``J``; from :class:`_AlongSpeeds`).
+        ``gradient``: ``J`` is the Jacobian of a position or an angle (its
+        columns' derivatives are symmetric, ``dJ_i/dq_k = dJ_k/dq_i``); false
+        for the angular-velocity Jacobian of a spatial body.
+        """
+        rows = range(jacobian.rows)
+        support = [k for k in range(jacobian.cols) if any(not jacobian[r, k].is_zero for r in rows)]
+        if not support:
+            return
+        factor = se.Integer(1) if isinstance(weight, se.DenseMatrix) else weight
+        jacobian = se.DenseMatrix(jacobian.rows, len(support), [jacobian[r, k] for r in rows for k in support])
+        qd = se.DenseMatrix(len(support), 1, [self.qd[k] for k in support])
+        weighted = _weigh(weight, jacobian)  # W J, so J^T W = weighted^T
+        _scatter(self.mass_terms, factor, support, support, weighted.T * jacobian, symmetric=True)
+        symbols = set().union(*(entry.free_symbols for entry in jacobian))
+        derivatives = {k: jacobian.diff(qk) for k, qk in enumerate(self.q) if qk in symbols}
+        if not derivatives:
+            return
+        jacobian_dot = se.zeros(jacobian.rows, len(support))
+        for k, derivative in derivatives.items():
+            jacobian_dot += derivative * self.qd[k]
+        cross = weighted.T * jacobian_dot  # X = J^T W Jd, Md = X + X^T
+        _scatter(self.mass_rate_terms, factor, support, support, cross + cross.T, symmetric=True)
+        weighted_velocity = (weighted * qd).T  # (W v)^T
+        # Velocity terms C qd = Md qd - dT/dq of this body: J^T W (Jd qd) + [(Jd_i - dJ/dq_i qd) . W v]_i;
+        # for a gradient J the bracket vanishes (Jd_i = dJ/dq_i qd).  For the body-frame angular
+        # velocity omega = J qd of a rigid body (W its central inertia) the bracket is Euler's
+        # gyroscopic term J^T (omega x W omega), far smaller written so.  Summed body by body these
+        # stay small where the entries of C, summed over l, would not.
+        _scatter(self.velocity_terms, factor, support, [0], weighted.T * bias)
+        if not gradient:
+            omega, spin = jacobian * qd, weighted * qd
+            gyroscopic = se.DenseMatrix(3, 1, [omega[1] * spin[2] - omega[2] * spin[1],
+                                               omega[2] * spin[0] - omega[0] * spin[2],
+                                               omega[0] * spin[1] - omega[1] * spin[0]])
+            _scatter(self.velocity_terms, factor, support, [0], jacobian.T * gyroscopic)
+        for i, derivative in derivatives.items():
+            _scatter(self.second_terms, factor, [i], support, weighted_velocity * derivative)
+            _scatter(self.second_terms, factor, [i], support, _weigh(weight, derivative * qd).T * jacobian)
+
+    def _sum(self, terms: dict, *, columns: int, symmetric: bool = False) -> se.DenseMatrix:
+        matrix = se.zeros(len(self.q), columns)
+        for (i, j), pairs in terms.items():
+            matrix[i, j] = _merge(pairs)
+            if symmetric:
+                matrix[j, i] = matrix[i, j]
+        return matrix
+
+    def matrices(self) -> tuple[se.DenseMatrix, se.DenseMatrix, se.DenseMatrix, se.DenseMatrix]:
+        """``(M, Md, T2, C qd)``."""
+        m = len(self.q)
+        return (self._sum(self.mass_terms, columns=m, symmetric=True),
+                self._sum(self.mass_rate_terms, columns=m, symmetric=True),
+                self._sum(self.second_terms, columns=m), self._sum(self.velocity_terms, columns=1))
+
+
+def _scatter(terms: dict, factor, rows: list, cols: list, block: se.DenseMatrix, *,
+             symmetric: bool = False) -> None:
+    """Append ``(factor, entry)`` for the nonzero entries of ``block`` to ``terms[(rows[a], cols[b])]``.
+
+    With ``symmetric`` only the upper triangle (``rows[a] <= cols[b]``) is kept.
+    """
+    for i, block_row in zip(rows, block.tolist()):
+        for j, entry in zip(cols, block_row):
+            if not entry.is_zero and (not symmetric or i <= j):
+                terms[(i, j)].append((factor, entry))
+
+
+def _merge(pairs: list) -> se.Basic:
+    """``sum factor * term`` with the factors of equal terms added first."""
+    factors: dict = defaultdict(list)
+    for factor, term in pairs:
+        factors[term].append(factor)
+    return se.Add(*[se.Add(*group) * term for term, group in factors.items()])
+
+
+def _simplifier(simplify) -> Callable[[sp.Expr], sp.Expr] | None:
+    if simplify is False or simplify is None:
+        return None
+    if simplify is True or simplify == "trigsimp":
+        return sp.trigsimp
+    if simplify == "simplify":
+        return sp.simplify
+    if callable(simplify):
+        return simplify
+    raise InputError(f"simplify must be False, True, 'trigsimp', 'simplify' or a callable, got {simplify!r}")
+
+
+def derive(system: System, *, simplify: bool | str | Callable = False) -> Equations:
+    """Derive the equations of motion of ``system`` in the Kronecker matrix form.
+
+    Returns the matrices of (Van Khang 2011, Eq. 23)::
+
+        M(q) qdd + C(q, qd) qd + Phi_q^T lambda + A^T mu + g(q) = f_Q
+        f(q) = 0,   A(q) qd + b(q) = 0
+
+    Parameters
+    ----------
+    system : System
+    simplify : bool, {'trigsimp', 'simplify'} or callable, optional
+        Simplify every entry of the results (``True`` means ``trigsimp``).
+        Off by default: simplification can cost far more than the derivation.
+
+    Returns
+    -------
+    Equations
+        ``M`` (m x m), ``C`` (m x m), ``Cqd`` (``C qd``, m x 1), ``g`` (m x 1),
+        ``Phi`` (r x 1), ``Phi_q`` (r x m), ``A`` (s x m), ``b`` (s x 1),
+        ``f_Q`` (m x 1); on first access ``C_christoffel`` (m x m), ``dM_dq``
+        (m x m²), ``Md``, ``gamma`` and ``gamma_nh``.
+    """
+    if not isinstance(system, System):
+        raise TypeError(f"derive takes a kronlag.System, got {type(system).__name__}")
+    q = [se.Symbol(s.name) for s in system.coordinates]
+    qd = [se.Symbol(s.name) for s in system.speeds]
+    m = len(q)
+    accumulator = _Accumulator(q, qd)
+    potential = se.Integer(0)
+    gravity = _se_matrix(system.gravity) if system.gravity is not None else None
+    generalized_force = se.zeros(m, 1)
+    rotation_jacobians = {}
+
+    along = _AlongSpeeds(q, qd)
+
+    def acceleration_bias(vector: se.DenseMatrix) -> se.DenseMatrix:  # Jd qd for J = d vector/dq
+        return se.DenseMatrix(vector.rows, 1, [along(entry)[1] for entry in vector])
+
+    for body in system.bodies:
+        position = _se_matrix(body.position)
+        mass = se.sympify(body.mass)
+        accumulator.add(_jacobian(position, q), mass, acceleration_bias(position))
+        if isinstance(body, PlanarBody):
+            angle = se.DenseMatrix(1, 1, [se.sympify(body.angle)])
+            angle_jacobian = _jacobian(angle, q)
+            accumulator.add(angle_jacobian, se.sympify(body.inertia), acceleration_bias(angle))
+            rotation_jacobians[body.name] = angle_jacobian
+        elif isinstance(body, RigidBody):
+            rotation_jacobian = _rotation_jacobian(body, q)
+            omega = rotation_jacobian * se.DenseMatrix(m, 1, qd)  # Jd qd = D(J qd) at fixed qd
+            accumulator.add(rotation_jacobian, _se_matrix(body.inertia),
+                            se.DenseMatrix(3, 1, [along(entry)[0] for entry in omega]), gradient=False)
+            rotation_jacobians[body.name] = rotation_jacobian
+        else:
+            assert isinstance(body, PointMass)
+        if gravity is not None:
+            potential -= mass * (gravity.T * position)[0, 0]
+
+    for spring in system.springs:
+        potential += se.sympify(spring.potential())
+    for term in system.potentials:
+        potential += se.sympify(term.expression)
+    g = se.DenseMatrix(m, 1, [se.diff(potential, qk) for qk in q])
+
+    qd_vector = se.DenseMatrix(m, 1, qd)
+    for damper in system.dampers:
+        separation = _se_matrix(damper.point_a - damper.point_b)
+        gradient = separation.T * _jacobian(separation, q)  # d^T dd/dq = L dL/dq
+        rate = (gradient * qd_vector)[0, 0]
+        squared = (separation.T * separation)[0, 0]
+        generalized_force -= gradient.T * (se.sympify(damper.coefficient) * rate / squared)
+    for force in system.forces:
+        value = _se_matrix(force.value)
+        if force.kind == "generalized":
+            generalized_force += value
+        elif force.kind == "point":
+            generalized_force += _jacobian(_se_matrix(force.where), q).T * value
+        else:
+            body = system.body(force.where)
+            if isinstance(body, RigidBody) and force.frame == "world":
+                value = _se_matrix(body.rotation).T * value
+            generalized_force += rotation_jacobians[body.name].T * value
+
+    constraints = se.DenseMatrix(len(system.constraints), 1,
+                                 [se.sympify(c.expression) for c in system.constraints])
+    constraint_jacobian = _jacobian(constraints, q)
+    velocity_constraints = [se.sympify(c.expression) for c in system.nonholonomic_constraints]
+    nonholonomic_matrix = se.DenseMatrix(len(velocity_constraints), m,
+                                         [se.diff(h, v) for h in velocity_constraints for v in qd])
+    zero_speeds = {v: 0 for v in qd}
+    nonholonomic_offset = se.DenseMatrix(len(velocity_constraints), 1,
+                                         [h.subs(zero_speeds) for h in velocity_constraints])
+
+    mass_matrix, mass_rate, second, velocity_terms = accumulator.matrices()
+    coriolis = mass_rate - second / 2
+
+    simplifier = _simplifier(simplify)
+    converter = _SympyConverter({symbol.name: symbol for symbol in (
+        *system.coordinates, *system.speeds, *system.parameters, t)})
+
+    def public(matrix: se.DenseMatrix, rows: int = m, cols: int = m) -> sp.ImmutableMatrix:
+        converted = converter.matrix(matrix, (rows, cols))
+        return converted.applyfunc(simplifier) if simplifier else converted
+
+    def christoffel() -> sp.ImmutableMatrix:
+        # Converted on first access: the Christoffel form is as large as C and
+        # most uses (simulation) never need it.
+        return public((mass_rate + second.T - second) / 2)
+
+    potential_expr = converter(potential)
+    return Equations(
+        system=system,
+        M=public(mass_matrix),
+        C=public(coriolis),
+        Cqd=public(velocity_terms, m, 1),
+        christoffel_source=christoffel,
+        g=public(g, m, 1),
+        Phi=public(constraints, len(system.constraints), 1),
+        Phi_q=public(constraint_jacobian, len(system.constraints), m),
+        A=public(nonholonomic_matrix, len(velocity_constraints), m),
+        b=public(nonholonomic_offset, len(velocity_constraints), 1),
+        f_Q=public(generalized_force, m, 1),
+        potential_energy=simplifier(potential_expr) if simplifier else potential_expr,
+        time=t,
+    )

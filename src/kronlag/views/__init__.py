@@ -1,0 +1,1 @@
+"""Views of results: time-history plots (:mod:`.plotting`) and animations (:mod:`.animation`)."""

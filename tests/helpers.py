@@ -1,0 +1,272 @@
+"""Shared test helpers, the one module test modules import from (no test module imports another).
+
+- the built-in models, derived once per session, and comparison of symbolic matrices, exactly
+  or at random numeric points;
+- numeric models of the built-in models with random parameter values, on either backend;
+- the paper's four-bar and quick-return written as bodies + joints;
+- trajectories built from closed-form kinematics, for testing graphics without
+  :func:`kronlag.simulate` (kinematically exact, the constraints hold to rounding, but not
+  dynamically meaningful: multipliers and energies are smooth stand-ins).
+"""
+
+from __future__ import annotations
+
+import functools
+import random
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import kronlag
+from kronlag import models
+from kronlag.model.free_bodies import free_body, mechanism
+from kronlag.numeric import codegen
+from kronlag.simulation.trajectory import Trajectory
+
+# -- symbolic models and comparisons ------------------------------------------------------------
+
+#: Every built-in model, by the name the tests use.
+MODEL_BUILDERS = {
+    "four_bar": models.four_bar,
+    "quick_return": models.quick_return,
+    "double_pendulum": models.double_pendulum,
+    "slider_crank": models.slider_crank,
+    "slider_crank_engine": models.slider_crank_engine,
+    "five_bar": models.five_bar,
+    "heavy_top": models.heavy_top,
+    "chaplygin_sleigh": models.chaplygin_sleigh,
+    "closed_chain_4_absolute": functools.partial(models.closed_chain, 4, "absolute"),
+    "closed_chain_4_relative": functools.partial(models.closed_chain, 4, "relative"),
+    "pendulum_cartesian": models.pendulum_cartesian,
+    "n_four_bar": models.n_four_bar,
+    "andrews_squeezer": models.andrews_squeezer,
+    "flyball_governor": models.flyball_governor,
+    # Not models.bricard: its symbolic C (2 MB of text) is too large for the 30-digit
+    # comparisons of the identity tests; tests/test_iftomm.py checks it numerically.
+}
+
+#: Digits of the numeric evaluations and the relative tolerance of comparisons.
+DIGITS = 30
+RELATIVE_TOLERANCE = 1e-12
+
+
+@functools.cache
+def derived(name: str) -> kronlag.Equations:
+    """``kronlag.derive`` of the built-in model ``name`` (cached: Equations are immutable)."""
+    return kronlag.derive(MODEL_BUILDERS[name]())
+
+
+def state_symbols(equations: kronlag.Equations) -> set[sp.Symbol]:
+    """Coordinates, speeds, accelerations and multipliers: the symbols that take signed values."""
+    return {*equations.coordinates, *equations.speeds, *equations.accelerations,
+            *equations.lambdas, *equations.mus}
+
+
+def is_zero(expr) -> bool:
+    """Symbolic test ``expr == 0`` (entry-wise for a matrix) via trig expansion and simplification."""
+    entries = expr if isinstance(expr, sp.MatrixBase) else [expr]
+    return all(sp.simplify(sp.expand_trig(sp.sympify(entry))) == 0 for entry in entries)
+
+
+def random_values(symbols, rng: random.Random, signed=frozenset()) -> dict:
+    """Random values: uniform in (-3, 3) for the ``signed`` symbols (angles, speeds,
+    multipliers), in (0.5, 2) for the others (masses, lengths, inertias...)."""
+    return {symbol: rng.uniform(-3, 3) if symbol in signed else rng.uniform(0.5, 2)
+            for symbol in symbols}
+
+
+def evaluate(matrix, values: dict) -> list[sp.Float]:
+    """The entries of ``matrix`` (row by row) at ``values``, with :data:`DIGITS` digits."""
+    floats = {symbol: sp.Float(value, DIGITS) for symbol, value in values.items()}
+    entries = [sp.sympify(entry).xreplace(floats).evalf(DIGITS) for entry in sp.Matrix(matrix)]
+    assert all(entry.is_number for entry in entries), "a symbol was left without a value"
+    return entries
+
+
+def assert_numerically_equal(actual, expected, signed=frozenset(), *, points: int = 3, seed: int = 0) -> None:
+    """``actual == expected`` at ``points`` random points, relative to the largest entry.
+
+    All free symbols get random values (see :func:`random_values`).
+    """
+    actual, expected = sp.Matrix(actual), sp.Matrix(expected)
+    assert actual.shape == expected.shape
+    symbols = actual.free_symbols | expected.free_symbols
+    rng = random.Random(seed)
+    for _ in range(points):
+        values = random_values(sorted(symbols, key=lambda s: s.name), rng, signed)
+        a, b = evaluate(actual, values), evaluate(expected, values)
+        scale = max((abs(x) for x in a + b), default=0)
+        error = max((abs(x - y) for x, y in zip(a, b)), default=0)
+        assert error <= RELATIVE_TOLERANCE * scale, (
+            f"differ by {error:.3e} (scale {scale:.3e}) at {values}")
+
+
+# -- numeric models ---------------------------------------------------------------------------------
+
+
+BACKENDS = ["python", "c"]
+
+
+needs_compiler = pytest.mark.skipif(codegen.c_compiler() is None, reason="no C compiler")
+
+
+def backend_params(backends=BACKENDS):
+    return [pytest.param(b, marks=needs_compiler) if b == "c" else b for b in backends]
+
+
+def parameter_values(name: str) -> dict[str, float]:
+    """Random values; a symmetric top's axial moment is capped at twice the transverse one
+    (the triangle inequality of principal moments, which NumericModel checks)."""
+    rng = random.Random(name)
+    values = {p.name: value for p, value in random_values(derived(name).parameters, rng).items()}
+    if {"Ixx", "Izz"} <= values.keys():
+        values["Izz"] = min(values["Izz"], 2 * values["Ixx"])
+    return values
+
+
+@functools.cache
+def numeric(name: str, backend: str) -> kronlag.NumericModel:
+    return derived(name).numeric(parameter_values(name), backend=backend)
+
+
+def random_state(eom: kronlag.Equations, seed: int) -> tuple[np.ndarray, np.ndarray, float]:
+    rng = np.random.default_rng(seed)
+    m = len(eom.coordinates)
+    return rng.uniform(-3, 3, m), rng.uniform(-3, 3, m), float(rng.uniform(0, 2))
+
+
+# -- mechanisms as bodies + joints ------------------------------------------------------------------
+
+
+FOUR_BAR_VALUES = dict(l1=0.2, l2=0.6, l3=0.5, l4=0.5, m1=1, m2=3, m3=2.5, I1=0.0033, I2=0.09, I3=0.052,
+                       g=9.81, tau=0.7)
+
+
+QUICK_RETURN_VALUES = dict(l_BC=0.2, l_AB=0.3, l_AE=0.8, l_EF=0.3, l_AH=0.75, m1=1.0, m2=2.5, m3=0.8, m4=0.3,
+                           m5=0.6, I1=0.004, I2=0.15, I3=0.006, g=9.81, tau=0.5)
+
+
+def four_bar_by_joints():
+    l1, l2, l3, l4, m1, m2, m3, I1, I2, I3, g, tau = sp.symbols("l1 l2 l3 l4 m1 m2 m3 I1 I2 I3 g tau")
+    bodies = [free_body("crank", mass=m1, inertia=I1), free_body("coupler", mass=m2, inertia=I2),
+              free_body("follower", mass=m3, inertia=I3)]
+    system = mechanism(bodies, parameters=[l1, l2, l3, l4, m1, m2, m3, I1, I2, I3, g, tau], gravity=(0, -g),
+                       name="four_bar_by_joints")
+    system.add_joint("revolute", "ground", "crank", at_b=(-l1 / 2, 0))
+    system.add_joint("revolute", "crank", "coupler", at_a=(l1 / 2, 0), at_b=(-l2 / 2, 0))
+    system.add_joint("revolute", "coupler", "follower", at_a=(l2 / 2, 0), at_b=(l3 / 2, 0))
+    system.add_joint("revolute", "ground", "follower", at_a=(l4, 0), at_b=(-l3 / 2, 0))
+    system.add_torque("crank", tau, name="drive")
+    return system
+
+
+def quick_return_by_joints():
+    l_BC, l_AB, l_AE, l_EF, l_AH = sp.symbols("l_BC l_AB l_AE l_EF l_AH")
+    m1, m2, m3, m4, m5, I1, I2, I3, g, tau = sp.symbols("m1 m2 m3 m4 m5 I1 I2 I3 g tau")
+    bodies = [free_body("crank", mass=m1, inertia=I1), free_body("rocker", mass=m2, inertia=I2),
+              free_body("link", mass=m3, inertia=I3), free_body("D", mass=m4), free_body("G", mass=m5)]
+    system = mechanism(bodies, parameters=[l_BC, l_AB, l_AE, l_EF, l_AH, m1, m2, m3, m4, m5, I1, I2, I3, g, tau],
+                       gravity=(0, -g), name="quick_return_by_joints")
+    system.add_joint("revolute", "ground", "crank", at_a=(0, l_AB), at_b=(-l_BC / 2, 0))
+    system.add_joint("revolute", "crank", "D", at_a=(l_BC / 2, 0))
+    system.add_joint("pin_in_slot", "rocker", "D", axis=(1, 0))
+    system.add_joint("revolute", "ground", "rocker", at_b=(-l_AE / 2, 0))
+    system.add_joint("revolute", "rocker", "link", at_a=(l_AE / 2, 0), at_b=(-l_EF / 2, 0))
+    system.add_joint("revolute", "link", "G", at_a=(l_EF / 2, 0))
+    system.add_joint("pin_in_slot", "ground", "G", at_a=(0, l_AH), axis=(1, 0))
+    system.add_torque("crank", tau, name="drive")
+    return system
+
+
+@functools.cache
+def numeric_by_joints(builder, values_name):
+    values = {"four_bar": FOUR_BAR_VALUES, "quick_return": QUICK_RETURN_VALUES}[values_name]
+    return kronlag.derive(builder()).numeric(values, backend="numpy")
+
+
+# -- closed-form trajectories for the graphics ----------------------------------------------------
+
+#: Four-bar of a crank-rocker type: crank l1, coupler l2, follower l3, ground l4.
+FOUR_BAR_PARAMETERS = {"l1": 1.0, "l2": 3.0, "l3": 2.5, "l4": 3.0, "m1": 1.0, "m2": 3.0, "m3": 2.5,
+                       "I1": 0.08, "I2": 2.25, "I3": 1.3, "g": 9.81, "tau": 0.0}
+HEAVY_TOP_PARAMETERS = {"m": 1.0, "l": 0.5, "g": 9.81, "Ixx": 0.1, "Izz": 0.05}
+
+
+
+class ParameterModel:
+    """Stand-in for :class:`kronlag.numeric.NumericModel` with what the graphics read from it:
+    the system (``equations.system``) and constant parameter values."""
+
+    time_varying = False
+
+    def __init__(self, system, parameters: dict[str, float]):
+        self.equations = SimpleNamespace(system=system)
+        self.parameter_names = tuple(parameter.name for parameter in system.parameters)
+        self._values = np.array([parameters[name] for name in self.parameter_names])
+
+    def parameter_vector(self, t: float = 0.0) -> np.ndarray:
+        return self._values.copy()
+
+
+def four_bar_joints(q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Joints B (crank tip) and C (coupler-follower), shape (N, 2), for crank angles ``q1``.
+
+    C is the upper intersection of the circle of radius l2 about B and the
+    circle of radius l3 about the ground pivot D = (l4, 0).
+    """
+    p = FOUR_BAR_PARAMETERS
+    b = np.column_stack([p["l1"] * np.cos(q1), p["l1"] * np.sin(q1)])
+    to_d = np.array([p["l4"], 0.0]) - b
+    distance = np.linalg.norm(to_d, axis=1)
+    along = (p["l2"] ** 2 - p["l3"] ** 2 + distance ** 2) / (2 * distance)
+    height = np.sqrt(p["l2"] ** 2 - along ** 2)
+    unit = to_d / distance[:, None]
+    normal = np.column_stack([-unit[:, 1], unit[:, 0]])
+    c = b + along[:, None] * unit + height[:, None] * normal
+    return b, c
+
+
+def _trajectory(system, t: np.ndarray, q: np.ndarray, qd: np.ndarray, position_residual: np.ndarray,
+                velocity_residual: np.ndarray, parameters: dict[str, float]) -> Trajectory:
+    n_constraints = position_residual.shape[1]
+    phase = t[:, None] + np.arange(n_constraints)[None, :]
+    kinetic = 0.5 * np.sum(qd ** 2, axis=1)
+    model = ParameterModel(system, parameters)
+    return Trajectory(t=t, q=q, qd=qd, qdd=np.gradient(qd, t, axis=0), lam=np.sin(phase),
+                      mu=np.zeros((len(t), 0)), kinetic_energy=kinetic, potential_energy=np.cos(t) - kinetic,
+                      position_residual=position_residual, velocity_residual=velocity_residual,
+                      coordinate_names=tuple(c.name for c in system.coordinates), model=model,
+                      method="closed-form", message="synthetic", nfev=0, njev=0, steps=len(t),
+                      wall_time=0.0)
+
+
+def four_bar_trajectory(t: np.ndarray, *, crank_speed: float = 2 * np.pi) -> Trajectory:
+    """The four-bar driven at constant crank speed, ``q1 = crank_speed * t``, from the position analysis."""
+    p = FOUR_BAR_PARAMETERS
+    q1 = crank_speed * t
+    b, c = four_bar_joints(q1)
+    q2 = np.unwrap(np.arctan2(c[:, 1] - b[:, 1], c[:, 0] - b[:, 0]))
+    q3 = np.unwrap(np.arctan2(c[:, 1], c[:, 0] - p["l4"]))
+    # Velocity loop closure: [-l2 sin q2, l3 sin q3; l2 cos q2, -l3 cos q3] [q2d; q3d] = crank_speed l1 [sin q1; -cos q1].
+    matrix = np.stack([np.stack([-p["l2"] * np.sin(q2), p["l3"] * np.sin(q3)], axis=-1),
+                       np.stack([p["l2"] * np.cos(q2), -p["l3"] * np.cos(q3)], axis=-1)], axis=1)
+    rhs = crank_speed * p["l1"] * np.column_stack([np.sin(q1), -np.cos(q1)])
+    q23d = np.linalg.solve(matrix, rhs[..., None])[..., 0]
+    q = np.column_stack([q1, q2, q3])
+    qd = np.column_stack([np.full_like(t, crank_speed), q23d])
+    position_residual = np.column_stack([
+        p["l1"] * np.cos(q1) + p["l2"] * np.cos(q2) - p["l3"] * np.cos(q3) - p["l4"],
+        p["l1"] * np.sin(q1) + p["l2"] * np.sin(q2) - p["l3"] * np.sin(q3)])
+    velocity_residual = np.einsum("nij,nj->ni", matrix, q23d) - rhs
+    return _trajectory(models.four_bar(), t, q, qd, position_residual, velocity_residual, FOUR_BAR_PARAMETERS)
+
+
+def heavy_top_trajectory(t: np.ndarray) -> Trajectory:
+    """A steadily precessing, spinning top: ``psi = t``, ``theta = 0.4``, ``phi = 20 t``."""
+    rates = np.array([1.0, 0.0, 20.0])
+    q = np.column_stack([t, np.full_like(t, 0.4), 20.0 * t])
+    qd = np.broadcast_to(rates, q.shape).copy()
+    empty = np.zeros((len(t), 0))
+    return _trajectory(models.heavy_top(), t, q, qd, empty, empty, HEAVY_TOP_PARAMETERS)
