@@ -60,7 +60,7 @@ from .symbolic.equations import Equations  # noqa: E402
 try:
     __version__ = version("kronlag")
 except PackageNotFoundError:  # running from a source tree that was never installed
-    __version__ = "0+unknown"
+    __version__ = "unknown"
 
 __all__ = [
     "calculus",

@@ -37,7 +37,7 @@ MOVED: dict[str, tuple[str, ...]] = {
     "kronlag.equations": ("kronlag.symbolic.equations",),
     "kronlag.export": ("kronlag.symbolic.export",),
     "kronlag.expressions": ("kronlag.model.expressions",),
-    "kronlag.frames": ("kronlag.model.frames", "kronlag.symbolic.kinematics"),
+    "kronlag.frames": ("kronlag.model.frames", "kronlag.model.rotations", "kronlag.symbolic.kinematics"),
     "kronlag.interop": ("kronlag.symbolic.interop",),
     "kronlag.joints": ("kronlag.model.joints", "kronlag.model.free_bodies"),
     "kronlag.modelfile": ("kronlag.model.modelfile", "kronlag.model.builtin", "kronlag.model.rotations"),

@@ -18,10 +18,12 @@ import numpy as np
 import sympy as sp
 
 from ..core.errors import ModelError
+from ..core.kernels import ExpressionFunction
 from ..model.expressions import parse_expression
 from ..model.modelfile import ModelFile, PrescribedMotion
 from ..model.symbols import t
 from ..model.system import drive_name
+from ..numeric.tolerances import RANK_RTOL, numerical_rank
 from ..simulation.simulate import simulate
 from ..studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
 from ..symbolic.derivation import derive
@@ -97,17 +99,13 @@ class ModelCheck:
         return "\n".join(lines)
 
 
-def _numbers(matrix: sp.MatrixBase, point: Mapping[sp.Symbol, float]) -> np.ndarray:
-    """Entries of ``matrix`` at ``point`` by substitution (shape kept)."""
-    floats = {symbol: sp.Float(value) for symbol, value in point.items()}
-    return np.array([[float(matrix[i, j].xreplace(floats).evalf()) for j in range(matrix.cols)]
-                     for i in range(matrix.rows)], dtype=float).reshape(matrix.shape)
-
-
 def check_model(model: ModelFile, *, equations: Equations | None = None) -> ModelCheck:
-    """Derive the equations and check the constraints at the initial guess.
+    """Derive the equations and check the constraints at the initial guess (at ``t = 0``).
 
-    Uses substitution into the symbolic matrices only (not the numeric layer).
+    Evaluates ``Phi``, ``Phi_q`` and ``A`` through a kernel of the symbolic matrices
+    (:class:`kronlag.core.kernels.ExpressionFunction`; no numeric model is built, so a model
+    with missing values is still checked as far as it can be), ranks by the rank policy
+    (:func:`kronlag.numeric.tolerances.numerical_rank`).
     """
     eom = equations if equations is not None else derive(model.system)
     m, r, s = eom.shape
@@ -117,13 +115,19 @@ def check_model(model: ModelFile, *, equations: Equations | None = None) -> Mode
     if not missing:
         values = model.numeric_values()
         q, qd = model.guess_vectors()
-        point = ({p: values[p.name] for p in system.parameters} | dict(zip(system.coordinates, q))
-                 | dict(zip(system.speeds, qd)))
-        rank_phi = int(np.linalg.matrix_rank(_numbers(eom.Phi_q, point))) if r else 0
-        rank_a = int(np.linalg.matrix_rank(_numbers(eom.A, point))) if s else 0
-        residual = float(np.max(np.abs(_numbers(eom.Phi, point)), initial=0.0))
+        evaluate = ExpressionFunction({"Phi": eom.Phi, "Phi_q": eom.Phi_q, "A": eom.A},
+                                      [("t", eom.time), ("q", eom.coordinates), ("qd", eom.speeds),
+                                       ("p", eom.parameters)], name="check")
+        at_guess = evaluate(0.0, q, qd, [values[p.name] for p in eom.parameters])
+        rank_phi, rank_a = (_rank(at_guess[name]) for name in ("Phi_q", "A"))
+        residual = float(np.max(np.abs(at_guess["Phi"]), initial=0.0))
     return ModelCheck(name=system.name, m=m, r=r, s=s, degrees_of_freedom=m - r - s, missing_values=missing,
                       rank_Phi_q=rank_phi, rank_A=rank_a, constraint_residual=residual)
+
+
+def _rank(matrix: np.ndarray) -> int:
+    """Numerical rank by the rank policy, with the default tolerance (no numeric model exists yet)."""
+    return numerical_rank(np.linalg.svd(matrix, compute_uv=False), RANK_RTOL) if matrix.size else 0
 
 
 # -- numeric set-up -------------------------------------------------------------------

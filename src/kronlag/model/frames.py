@@ -1,12 +1,9 @@
-"""Frames, rotations and points fixed in a body.
+"""Frames and points fixed in a body.
 
-Rotation matrices ``R`` map body-frame components to world components
-(``r_world = origin + R r_body``), as :class:`~kronlag.RigidBody` expects:
+A frame is an origin and a rotation ``R`` that maps frame components to world components
+(``r_world = origin + R r_frame``; the rotations themselves are built in
+:mod:`kronlag.model.rotations`):
 
-- :func:`elementary_rotation` (``R_x``, ``R_y``, ``R_z``), :func:`axis_angle`
-  (Rodrigues), :func:`euler_sequence` (Euler/Cardan angles, intrinsic or
-  extrinsic) and :func:`euler_parameters` (unit quaternion ``e0, e1, e2, e3``,
-  whose normalization constraint :func:`euler_parameter_constraint` returns);
 - :class:`Frame`: an origin and a rotation, composed with ``*``;
 - :func:`body_frame`, :func:`body_point`: the world position of a point given in
   body coordinates (relative to the body's centre of mass, in its body frame);
@@ -17,33 +14,19 @@ Their velocities and accelerations are in :mod:`kronlag.symbolic.kinematics`.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import sympy as sp
 
 from ..core.errors import ModelError
-from .bodies import PlanarBody, PointMass, RigidBody
 from .inputs import as_components
-from .rotations import (
-    axis_angle,
-    elementary_rotation,
-    euler_parameter_constraint,
-    euler_parameters,
-    euler_parameters_of,
-    euler_sequence,
-    planar_rotation,
-    skew,
-)
+
+if TYPE_CHECKING:
+    from .bodies import Body
 
 __all__ = [
-    "elementary_rotation",
-    "planar_rotation",
-    "axis_angle",
-    "euler_sequence",
-    "euler_parameters",
-    "euler_parameter_constraint",
-    "euler_parameters_of",
-    "skew",
     "Frame",
     "body_frame",
     "body_point",
@@ -98,26 +81,17 @@ class Frame:
         return Frame(-self.rotation.T * self.origin, self.rotation.T)
 
 
-def body_frame(body: PlanarBody | RigidBody | PointMass) -> Frame:
+def body_frame(body: Body) -> Frame:
     """The body frame: origin at the centre of mass, axes of the body's rotation.
 
     A point mass has no orientation; its frame has the world axes.
     """
-    if isinstance(body, PlanarBody):
-        return Frame(body.position, planar_rotation(body.angle))
-    if isinstance(body, RigidBody):
-        return Frame(body.position, body.rotation)
-    if isinstance(body, PointMass):
-        return Frame(body.position)
-    raise ModelError(f"expected a PlanarBody, RigidBody or PointMass, got {type(body).__name__}")
+    return body.pose().frame
 
 
-def body_point(body: PlanarBody | RigidBody | PointMass, local) -> sp.Matrix:
+def body_point(body: Body, local: Iterable) -> sp.Matrix:
     """World position ``r_c + R s`` of the point with body coordinates ``s`` (from the centre of mass)."""
-    if isinstance(body, PointMass) and any(sp.sympify(x) != 0 for x in local):
-        raise ModelError(f"point mass {body.name!r} has no extent: a point on it must be at (0, ...), "
-                         f"got {tuple(local)}")
-    return body_frame(body).point(local)
+    return body.point(local)
 
 
 @dataclass(frozen=True)

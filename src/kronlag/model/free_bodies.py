@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import sympy as sp
 
 from ..core.errors import ModelError
-from .bodies import PlanarBody, PointMass, RigidBody
+from .bodies import Body, PlanarBody, PointMass, RigidBody
 from .rotations import euler_parameter_constraint, euler_parameters, euler_sequence
 from .system import System
 
@@ -22,13 +22,14 @@ class FreeBody:
 
     Attributes
     ----------
-    body : PlanarBody, RigidBody or PointMass
+    body : Body
+        A PlanarBody, RigidBody or PointMass.
     coordinates : tuple of sympy.Symbol
     constraints : tuple of (name, expression)
         Constraints among its own coordinates (Euler-parameter normalization).
     """
 
-    body: PlanarBody | RigidBody | PointMass
+    body: Body
     coordinates: tuple[sp.Symbol, ...]
     constraints: tuple[tuple[str, sp.Expr], ...] = ()
 

@@ -55,29 +55,14 @@ from typing import TYPE_CHECKING
 import sympy as sp
 
 from ..core.errors import ModelError
-from .bodies import PlanarBody, PointMass, RigidBody
-from .frames import GROUND, BodyPoint
-from .rotations import planar_rotation
+from .bodies import Pose
+from .frames import GROUND, BodyPoint, Frame
+from .rotations import skew
 
 if TYPE_CHECKING:
     from .system import System
 
 __all__ = ["Joint", "add_joint", "JOINT_KINDS"]
-
-
-@dataclass(frozen=True)
-class _Pose:
-    """A body's placement: ``point(s) = origin + R s``; ``angle`` for planar bodies."""
-
-    origin: sp.Matrix
-    rotation: sp.Matrix
-    angle: sp.Expr
-
-    def point(self, local: sp.Matrix) -> sp.Matrix:
-        return self.origin + self.rotation * local
-
-    def direction(self, local: sp.Matrix) -> sp.Matrix:
-        return self.rotation * local
 
 
 @dataclass(frozen=True)
@@ -97,17 +82,21 @@ def _dot(u: sp.Matrix, v: sp.Matrix) -> sp.Expr:
     return (u.T * v)[0, 0]
 
 
-def _coincident(a: _Pose, b: _Pose, g: _Geometry) -> Rows:
-    separation = b.point(g.at_b) - a.point(g.at_a)
-    return list(zip("xyz", separation))
+def _separation(a: Pose, b: Pose, g: _Geometry) -> sp.Matrix:
+    """``P_B - P_A``: from A's joint point to B's."""
+    return b.frame.point(g.at_b) - a.frame.point(g.at_a)
 
 
-def _planar_normal(a: _Pose, b: _Pose, g: _Geometry) -> Rows:
-    normal = a.direction(sp.Matrix([-g.axis[1], g.axis[0]]))
-    return [("normal", _dot(normal, b.point(g.at_b) - a.point(g.at_a)))]
+def _coincident(a: Pose, b: Pose, g: _Geometry) -> Rows:
+    return list(zip("xyz", _separation(a, b, g)))
 
 
-def _planar_angle(a: _Pose, b: _Pose, g: _Geometry) -> Rows:
+def _planar_normal(a: Pose, b: Pose, g: _Geometry) -> Rows:
+    normal = a.frame.direction(sp.Matrix([-g.axis[1], g.axis[0]]))
+    return [("normal", _dot(normal, _separation(a, b, g)))]
+
+
+def _planar_angle(a: Pose, b: Pose, g: _Geometry) -> Rows:
     return [("angle", b.angle - a.angle - g.angle)]
 
 
@@ -120,33 +109,33 @@ def _unit_normals(axis: sp.Matrix) -> tuple[sp.Matrix, sp.Matrix]:
     return p1, sp.simplify(unit.cross(p1))
 
 
-def _axis_alignment(a: _Pose, b: _Pose, g: _Geometry) -> Rows:
+def _axis_alignment(a: Pose, b: Pose, g: _Geometry) -> Rows:
     p1, p2 = _unit_normals(g.axis)
-    axis_b = b.direction(g.axis_b)
-    return [("axis1", _dot(a.direction(p1), axis_b)), ("axis2", _dot(a.direction(p2), axis_b))]
+    axis_b = b.frame.direction(g.axis_b)
+    return [("axis1", _dot(a.frame.direction(p1), axis_b)), ("axis2", _dot(a.frame.direction(p2), axis_b))]
 
 
-def _spatial_normal(a: _Pose, b: _Pose, g: _Geometry) -> Rows:
-    separation = b.point(g.at_b) - a.point(g.at_a)
-    return [(f"normal{i + 1}", _dot(a.direction(p), separation)) for i, p in enumerate(_unit_normals(g.axis))]
+def _spatial_normal(a: Pose, b: Pose, g: _Geometry) -> Rows:
+    separation = _separation(a, b, g)
+    return [(f"normal{i + 1}", _dot(a.frame.direction(p), separation)) for i, p in enumerate(_unit_normals(g.axis))]
 
 
-def _orientation_lock(a: _Pose, b: _Pose, g: _Geometry) -> Rows:
-    expected = a.rotation * g.rotation
+def _orientation_lock(a: Pose, b: Pose, g: _Geometry) -> Rows:
+    expected = a.frame.rotation * g.rotation
     e = sp.eye(3)
-    return [(name, _dot(expected * e[:, i], b.rotation * e[:, j]))
+    return [(name, _dot(expected * e[:, i], b.frame.rotation * e[:, j]))
             for name, i, j in (("rx", 1, 2), ("ry", 2, 0), ("rz", 0, 1))]
 
 
-def _cross_axes(a: _Pose, b: _Pose, g: _Geometry) -> Rows:
-    return [("cross", _dot(a.direction(g.axis), b.direction(g.axis_b)))]
+def _cross_axes(a: Pose, b: Pose, g: _Geometry) -> Rows:
+    return [("cross", _dot(a.frame.direction(g.axis), b.frame.direction(g.axis_b)))]
 
 
 @dataclass(frozen=True)
 class _Kind:
-    rows: tuple[Callable[[_Pose, _Pose, _Geometry], Rows], ...]
+    rows: tuple[Callable[[Pose, Pose, _Geometry], Rows], ...]
     needs: tuple[str, ...] = ()  # geometry the kind needs: "axis", "axis_b"
-    turns: bool = False  # uses the orientation of both bodies (not for point masses)
+    turns: bool = False  # uses the orientation of both bodies (not for bodies without one: point masses)
     accepts: tuple[str, ...] = ()  # optional geometry it uses: "axis_b", "angle", "rotation"
 
 
@@ -208,28 +197,17 @@ class Joint:
         return self.point.rows
 
 
-def _pose(system: System, name: str, dimension: int) -> _Pose:
-    if name == GROUND:
-        return _Pose(sp.zeros(dimension, 1), sp.eye(dimension), sp.Integer(0))
-    body = system.body(name)
-    if isinstance(body, PlanarBody):
-        return _Pose(sp.Matrix(body.position), planar_rotation(body.angle), body.angle)
-    if isinstance(body, RigidBody):
-        return _Pose(sp.Matrix(body.position), sp.Matrix(body.rotation), sp.Integer(0))
-    return _Pose(sp.Matrix(body.position), sp.eye(dimension), sp.Integer(0))
+def _pose(system: System, name: str, dimension: int) -> Pose:
+    return Pose(Frame((0,) * dimension)) if name == GROUND else system.body(name).pose()
 
 
-def _virtual_pose(pose: _Pose, at_b: sp.Matrix, point: sp.Matrix, turn: sp.Matrix) -> _Pose:
+def _virtual_pose(pose: Pose, at_b: sp.Matrix, point: sp.Matrix, turn: sp.Matrix) -> Pose:
     """B's pose moved so that its joint point is at ``point`` and turned by ``turn`` about it
-    (to first order): ``R' = (I + [turn]x) R``, ``origin' = point - R' at_b``."""
-    if turn.rows == 1:
-        rotation = (sp.eye(2) + turn[0] * sp.Matrix([[0, -1], [1, 0]])) * pose.rotation
-        angle = pose.angle + turn[0]
-    else:
-        x, y, z = turn
-        rotation = (sp.eye(3) + sp.Matrix([[0, -z, y], [z, 0, -x], [-y, x, 0]])) * pose.rotation
-        angle = pose.angle
-    return _Pose(point - rotation * at_b, rotation, angle)
+    (to first order): ``R' = (I + [turn]x) R``, ``origin' = point - R' at_b`` (in the plane
+    ``turn`` is one angle, which also turns the planar angle)."""
+    rotation = (sp.eye(point.rows) + skew(turn)) * pose.frame.rotation
+    angle = pose.angle + turn[0] if turn.rows == 1 else pose.angle
+    return Pose(Frame(point - rotation * at_b, rotation), angle)
 
 
 def _local(system: System, value, body: str, dimension: int, what: str) -> sp.Matrix:
@@ -310,12 +288,12 @@ def add_joint(system: System, kind: str, body_a: str, body_b: str, *, at_a=None,
         raise ModelError(f"duplicate joint name {name!r}")
     spec = kinds[kind]
     for body in (body_a, body_b):
-        if body != GROUND and spec.turns and isinstance(system.body(body), PointMass):
+        if body != GROUND and spec.turns and not system.body(body).oriented:
             raise ModelError(f"{what}: a {kind} joint holds the orientation of its bodies, but {body!r} is a "
-                             "point mass without one")
-    if body_a != GROUND and "axis" in spec.needs and isinstance(system.body(body_a), PointMass):
-        raise ModelError(f"{what}: the axis of a {kind} joint is fixed in body_a, but {body_a!r} is a point mass "
-                         "without an orientation")
+                             f"{system.body(body).kind} without one")
+    if body_a != GROUND and "axis" in spec.needs and not system.body(body_a).oriented:
+        raise ModelError(f"{what}: the axis of a {kind} joint is fixed in body_a, but {body_a!r} is a "
+                         f"{system.body(body_a).kind} without an orientation")
     given = {"axis": axis, "axis_b": axis_b, "angle": None if angle == 0 else angle, "rotation": rotation}
     unused = [key for key, value in given.items() if value is not None and key not in (*spec.needs, *spec.accepts)]
     if unused:
@@ -342,7 +320,7 @@ def add_joint(system: System, kind: str, body_a: str, body_b: str, *, at_a=None,
     turn = sp.Matrix(sp.symbols(f"kronlag_turn0:{1 if dimension == 2 else 3}", cls=sp.Dummy))
     virtual = _virtual_pose(pose_b, geometry.at_b, point, turn)
     virtual_rows = sp.Matrix([expr for rule in spec.rows for _, expr in rule(pose_a, virtual, geometry)])
-    joint_point = pose_b.point(geometry.at_b)
+    joint_point = pose_b.frame.point(geometry.at_b)
     at_state = {**dict(zip(point, joint_point)), **{x: 0 for x in turn}}
     wrench = -virtual_rows.jacobian(list(point) + list(turn)).T.subs(at_state)
 
@@ -359,6 +337,6 @@ def add_joint(system: System, kind: str, body_a: str, body_b: str, *, at_a=None,
                  for key in ("at_a", "at_b", *spec.needs, *spec.accepts) if key in ("at_a", "at_b")
                  or given[key] is not None)
     joint = Joint(name, kind, body_a, body_b, constraint_names, sp.ImmutableMatrix(joint_point),
-                  sp.ImmutableMatrix(pose_b.rotation), sp.ImmutableMatrix(wrench), kept)
+                  sp.ImmutableMatrix(pose_b.frame.rotation), sp.ImmutableMatrix(wrench), kept)
     system.joints.append(joint)
     return joint

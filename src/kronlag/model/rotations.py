@@ -20,6 +20,7 @@ import numpy as np
 import sympy as sp
 
 from ..core.errors import ModelError
+from ..core.kernels import ExpressionFunction
 from .inputs import as_components, as_scalar, as_vector
 
 __all__ = [
@@ -56,13 +57,27 @@ def elementary_rotation(axis: str, angle) -> sp.Matrix:
 
 
 def planar_rotation(angle) -> sp.Matrix:
-    """Rotation of the plane by ``angle``, shape (2, 2)."""
-    c, s = sp.cos(angle), sp.sin(angle)
-    return sp.Matrix([[c, -s], [s, c]])
+    """Rotation of the plane by ``angle``, shape (2, 2): the upper left block of ``R_z(angle)``."""
+    return elementary_rotation("z", angle)[:2, :2]
 
 
 def skew(vector) -> sp.Matrix:
-    """The matrix ``[v]x`` with ``[v]x w = v x w``, shape (3, 3)."""
+    """The matrix ``[v]x`` with ``[v]x w = v x w``: shape (3, 3) for a 3-vector; for a 1-vector ``(w,)``
+    (an angle or angular velocity about the normal of the plane) the planar ``[[0, -w], [w, 0]]``,
+    shape (2, 2), with ``[w]x r = w e_z x r``.
+
+    >>> skew((sp.Symbol("w"),))
+    Matrix([
+    [0, -w],
+    [w,  0]])
+    """
+    try:
+        vector = list(vector)
+    except TypeError:
+        pass  # as_components reports it
+    if isinstance(vector, list) and len(vector) == 1:
+        (w,) = as_components(vector, "skew: vector", 1)
+        return sp.Matrix([[0, -w], [w, 0]])
     x, y, z = as_components(vector, "skew: vector", 3)
     return sp.Matrix([[0, -z, y], [z, 0, -x], [-y, x, 0]])
 
@@ -214,9 +229,15 @@ class RotationSequence:
             checked.append((vector, as_scalar(angle, f"{what} factor {k} angle")))
         object.__setattr__(self, "factors", tuple(checked))
 
+    @property
+    def axis_names(self) -> tuple[str | None, ...]:
+        """The name ``"x"``, ``"y"`` or ``"z"`` of each factor's axis, ``None`` for another axis."""
+        return tuple(next((name for name, unit in _PRINCIPAL_AXES.items() if list(axis) == list(unit)), None)
+                     for axis, _ in self.factors)
+
     def _factor_matrix(self, k: int) -> sp.ImmutableMatrix:
         axis, angle = self.factors[k]
-        principal = next((name for name, unit in _PRINCIPAL_AXES.items() if list(axis) == list(unit)), None)
+        principal = self.axis_names[k]
         rotation = axis_angle(axis, angle) if principal is None else elementary_rotation(principal, angle)
         return sp.ImmutableMatrix(rotation)
 
@@ -252,11 +273,13 @@ def check_rotation(rotation: sp.ImmutableMatrix, what: str) -> None:
     """Raise :class:`ModelError` unless ``rotation`` is orthogonal with determinant +1.
 
     Entries of ``R^T R - I`` small enough are simplified symbolically (a zero is a
-    proof); otherwise, or if some entry does not simplify to zero, ``R`` is evaluated at
-    :data:`_ORTHOGONALITY_POINTS` random points of its symbols (uniform in [-2, 2]).  A
-    rotation written with Euler parameters is orthogonal only on their normalization
-    constraint: ``R^T R = s(q) I`` with a factor ``s`` that varies with the coordinates is
-    accepted as such, a constant factor other than 1 is not.
+    proof); otherwise, or if some entry does not simplify to zero, ``R`` is evaluated
+    (:class:`~kronlag.core.kernels.ExpressionFunction`) at the first
+    :data:`_ORTHOGONALITY_POINTS` of ``10 *`` as many random points of its symbols
+    (uniform in [-2, 2]) where it is finite.  A rotation written with Euler parameters is
+    orthogonal only on their normalization constraint: ``R^T R = s(q) I`` with a factor
+    ``s`` that varies with the coordinates is accepted as such, a constant factor other
+    than 1 is not.
     """
     deviation = rotation.T * rotation - sp.eye(3)
     if all(sp.count_ops(entry) <= _SYMBOLIC_CHECK_OPERATIONS for entry in deviation):
@@ -264,40 +287,38 @@ def check_rotation(rotation: sp.ImmutableMatrix, what: str) -> None:
                 and sp.trigsimp(sp.expand(rotation.det())) == 1):
             return
     symbols = sorted(rotation.free_symbols, key=lambda symbol: symbol.name)
-    evaluate = sp.lambdify(symbols, rotation, modules="numpy")
-    generator = np.random.default_rng(20111)
-    points: list[tuple[dict, np.ndarray]] = []
-    for _ in range(10 * _ORTHOGONALITY_POINTS):
-        values = generator.uniform(-2.0, 2.0, len(symbols))
-        with np.errstate(all="ignore"):
-            try:
-                matrix = np.array(evaluate(*values), dtype=float)
-            except (ZeroDivisionError, ValueError, TypeError, OverflowError):
-                continue
-        if np.all(np.isfinite(matrix)):
-            points.append((dict(zip((s.name for s in symbols), values)), matrix))
-        if len(points) == _ORTHOGONALITY_POINTS:
-            break
+    try:
+        evaluate = ExpressionFunction({"R": rotation}, [("x", symbols)], name="rotation")
+    except (ModelError, NotImplementedError) as error:
+        raise ModelError(f"{what} cannot be evaluated numerically (to check that it is orthogonal): "
+                         f"{error}") from None
+    candidates = np.random.default_rng(20111).uniform(-2.0, 2.0, (10 * _ORTHOGONALITY_POINTS, len(symbols)))
+    with np.errstate(all="ignore"):
+        matrices = evaluate.batch(candidates)["R"]
+    finite = np.all(np.isfinite(matrices), axis=(1, 2))
+    points = list(zip(candidates[finite], matrices[finite]))[:_ORTHOGONALITY_POINTS]
     if not points:
         raise ModelError(f"{what} cannot be evaluated at random values of its symbols "
                          f"{', '.join(s.name for s in symbols)} (to check that it is orthogonal)")
+
+    def where(values: np.ndarray) -> str:
+        return ", ".join(f"{s.name}={value:.4g}" for s, value in zip(symbols, values)) or "its constant value"
+
     scales = []
-    for point, matrix in points:
+    for values, matrix in points:
         gram = matrix.T @ matrix
         scale = np.trace(gram) / 3
-        where = ", ".join(f"{name}={value:.4g}" for name, value in point.items()) or "its constant value"
         off = np.abs(gram - scale * np.eye(3))
         if off.max() > _ORTHOGONALITY_TOLERANCE * max(1.0, scale):
             i, j = np.unravel_index(np.argmax(off), off.shape)
             expected = f"{scale:.6g}" if i == j else "0"
             raise ModelError(f"{what} is not orthogonal: (R^T R)[{i},{j}] = {gram[i, j]:.6g}, expected {expected} "
-                             f"(columns {i} and {j} of R are not orthonormal) at {where}")
+                             f"(columns {i} and {j} of R are not orthonormal) at {where(values)}")
         determinant = np.linalg.det(matrix)
         if determinant <= 0:
-            raise ModelError(f"{what} has determinant {determinant:.6g} at {where}: "
+            raise ModelError(f"{what} has determinant {determinant:.6g} at {where(values)}: "
                              "it is a reflection, not a rotation (expected +1)")
         scales.append(scale)
     if np.ptp(scales) <= _ORTHOGONALITY_TOLERANCE and abs(scales[0] - 1) > _ORTHOGONALITY_TOLERANCE:
-        where = ", ".join(f"{name}={value:.4g}" for name, value in points[0][0].items()) or "its constant value"
         raise ModelError(f"{what} is not orthogonal: R^T R = {scales[0]:.6g} I (expected the identity, "
-                         f"(R^T R)[0,0] = {scales[0]:.6g}) at {where}")
+                         f"(R^T R)[0,0] = {scales[0]:.6g}) at {where(points[0][0])}")

@@ -25,11 +25,21 @@ from dataclasses import dataclass
 import sympy as sp
 
 from ..core.errors import ModelError
-from .bodies import PlanarBody, PointMass, RigidBody
+from .bodies import Body
 from .frames import BodyPoint, make_body_point
 from .inputs import as_scalar, as_vector
 from .joints import Joint, add_joint
-from .loads import AppliedForce, Damper, NamedExpression, Spring
+from .loads import (
+    AppliedForce,
+    BodyTorque,
+    Damper,
+    GeneralizedForce,
+    Load,
+    NamedExpression,
+    PointForce,
+    Potential,
+    Spring,
+)
 from .symbols import MULTIPLIER_NAME, acceleration_symbol, check_name, speed_symbol, t
 
 __all__ = ["System", "DrawingLine", "drive_name"]
@@ -42,6 +52,10 @@ class DrawingLine:
     name: str
     points: tuple[sp.ImmutableMatrix, ...]
 
+
+def _loads_of(kind: type[Load], doc: str) -> property:
+    """A read-only view of ``system.loads``: those of type ``kind``, as a tuple."""
+    return property(lambda system: tuple(load for load in system.loads if isinstance(load, kind)), doc=doc)
 
 
 def drive_name(target) -> str:
@@ -77,8 +91,10 @@ class System:
         self.parameters = self._symbols(parameters, "parameter")
         self._check_unique_names()
         self.gravity = None
-        self.bodies, self.constraints, self.nonholonomic_constraints = [], [], []
-        self.springs, self.dampers, self.potentials, self.forces = [], [], [], []
+        self.bodies: list[Body] = []
+        self.constraints: list[NamedExpression] = []
+        self.nonholonomic_constraints: list[NamedExpression] = []
+        self.loads: list[Load] = []  # in the order added; springs, dampers, potentials, forces list them by type
         self.drawing: list[DrawingLine] = []
         self.traces: list[DrawingLine] = []
         self.points: dict[str, BodyPoint] = {}
@@ -173,27 +189,30 @@ class System:
         if any(item.name == name for item in collection):
             raise ModelError(f"duplicate {what} name {name!r}")
 
+    # -- the loads, by type (views of ``loads``) ------------------------------
+
+    springs = _loads_of(Spring, "The springs, in the order added.")
+    dampers = _loads_of(Damper, "The dampers, in the order added.")
+    potentials = _loads_of(Potential, "The potential energy terms of :meth:`add_potential`, in the order added.")
+    forces = _loads_of(AppliedForce, "The applied forces, torques and generalized forces, in the order added.")
+
     # -- building -----------------------------------------------------------
 
-    def add_body(self, body: PlanarBody | RigidBody | PointMass) -> PlanarBody | RigidBody | PointMass:
-        """Add a body; its mass and inertia must be constant, its pose depend on q only."""
-        if not isinstance(body, PlanarBody | RigidBody | PointMass):
-            raise ModelError(f"add_body takes a PlanarBody, RigidBody or PointMass, got {type(body).__name__}")
+    def add_body(self, body: Body) -> Body:
+        """Add a body (a :class:`~kronlag.model.bodies.Body`: a PlanarBody, RigidBody, PointMass...);
+        its mass and inertia must be constant, its pose depend on q only."""
+        if not isinstance(body, Body):
+            raise ModelError(f"add_body takes a PlanarBody, RigidBody, PointMass or another Body, "
+                             f"got {type(body).__name__}")
         what = f"body {body.name!r}"
         self._unique(self.bodies, body.name, "body")
         self._check_dimension(body.dimension, what)
-        self._check_symbols(body.mass, f"{what} mass", allow_q=False)
-        if getattr(body, "inertia", None) is not None:
-            self._check_symbols(sp.Matrix([body.inertia]), f"{what} inertia", allow_q=False)
-        self._check_symbols(body.position, f"{what} position")
-        if isinstance(body, PlanarBody):
-            self._check_symbols(body.angle, f"{what} angle")
-        if isinstance(body, RigidBody):
-            self._check_symbols(body.rotation, f"{what} rotation")
+        for field, expression, varies in body.expressions():
+            self._check_symbols(expression, f"{what} {field}", allow_q=varies)
         self.bodies.append(body)
         return body
 
-    def body(self, name: str) -> PlanarBody | RigidBody | PointMass:
+    def body(self, name: str) -> Body:
         """The body called ``name``."""
         for body in self.bodies:
             if body.name == name:
@@ -305,7 +324,7 @@ class System:
         length = as_scalar(free_length, f"spring {name!r} free length")
         self._check_symbols(k, f"spring {name!r} stiffness", allow_q=False)
         self._check_symbols(length, f"spring {name!r} free length", allow_q=False)
-        self.springs.append(Spring(name, a, b, k, length))
+        self.loads.append(Spring(name, a, b, k, length))
 
     def add_damper(self, point_a, point_b, *, coefficient, name: str | None = None) -> None:
         """Add a linear damper between two points; it enters ``f_Q``."""
@@ -314,7 +333,7 @@ class System:
         a, b = self._point_pair(point_a, point_b, f"damper {name!r}")
         c = as_scalar(coefficient, f"damper {name!r} coefficient")
         self._check_symbols(c, f"damper {name!r} coefficient", allow_q=False)
-        self.dampers.append(Damper(name, a, b, c))
+        self.loads.append(Damper(name, a, b, c))
 
     def _point_pair(self, point_a, point_b, what: str):
         a = as_vector(point_a, f"{what} first point", (2, 3))
@@ -332,7 +351,7 @@ class System:
         self._unique(self.potentials, name, "potential")
         expr = as_scalar(expression, f"potential {name!r}")
         self._check_symbols(expr, f"potential {name!r}")
-        self.potentials.append(NamedExpression(name, expr))
+        self.loads.append(Potential(name, expr))
 
     def add_generalized_force(self, force, *, name: str | None = None) -> None:
         """Add generalized non-conservative forces (a vector of length m) to ``f_Q``.
@@ -343,7 +362,7 @@ class System:
         self._unique(self.forces, name, "force")
         vector = as_vector(force, f"generalized force {name!r}", (len(self.coordinates),))
         self._check_symbols(vector, f"generalized force {name!r}", allow_qd=True, allow_t=True)
-        self.forces.append(AppliedForce(name, "generalized", vector))
+        self.loads.append(GeneralizedForce(name, vector))
 
     def add_force(self, point, force, *, name: str | None = None) -> None:
         """Add a force ``F`` (inertial components) acting at ``point``: ``f_Q += J^T F``, ``J = dpoint/dq``."""
@@ -354,7 +373,7 @@ class System:
         self._check_dimension(where.rows, f"force {name!r}")
         self._check_symbols(where, f"force {name!r} point")
         self._check_symbols(vector, f"force {name!r}", allow_qd=True, allow_t=True)
-        self.forces.append(AppliedForce(name, "point", vector, where))
+        self.loads.append(PointForce(name, vector, where))
 
     def add_torque(self, body: str, torque, *, frame: str = "world", name: str | None = None) -> None:
         """Add a torque acting on a body.
@@ -366,18 +385,11 @@ class System:
         name = name or f"torque {len(self.forces) + 1}"
         self._unique(self.forces, name, "force")
         target = self.body(body)
-        if isinstance(target, PointMass):
-            raise ModelError(f"torque {name!r} acts on point mass {body!r}, which cannot take a torque")
+        vector = target.torque_components(torque, f"torque {name!r}")
         if frame not in ("world", "body"):
             raise ModelError(f"torque {name!r}: frame must be 'world' or 'body', got {frame!r}")
-        if isinstance(target, PlanarBody):
-            if isinstance(torque, Iterable) and not isinstance(torque, sp.Expr | str):
-                raise ModelError(f"torque {name!r} on planar body {body!r} must be a scalar")
-            vector = sp.ImmutableMatrix([as_scalar(torque, f"torque {name!r}")])
-        else:
-            vector = as_vector(torque, f"torque {name!r}", (3,))
         self._check_symbols(vector, f"torque {name!r}", allow_qd=True, allow_t=True)
-        self.forces.append(AppliedForce(name, "body torque", vector, body, frame))
+        self.loads.append(BodyTorque(name, vector, target, frame))
 
     def add_drawing_line(self, points, *, name: str | None = None) -> None:
         """Add a polyline for animations: links are drawn as lines, joints as dots at the vertices."""

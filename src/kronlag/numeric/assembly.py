@@ -57,9 +57,10 @@ def assemble(model: NumericModel, q_guess, *, fixed: Mapping | None = None, qd_g
                             f"{dict(fixed or {})} held: max |Phi| = {residual:.3g} > tol = {tol:g}", residual)
     qd = np.zeros(model.m) if qd_guess is None else model.state_vector(qd_guess, "qd_guess").copy()
     held = held_values(model, qd_fixed, qd)
-    qd = project_velocities(model, q, qd, t, free=[i for i in range(model.m) if i not in held])
+    qd = project_velocities(model, q, qd, t, free=[i for i in range(model.m) if i not in held],
+                            terms=positions.terms)
     if model.r + model.s:
-        B, c = velocity_constraints(model.dynamics_terms(q, np.zeros(model.m), t))
+        B, c = velocity_constraints(positions.terms)
         violation = float(np.max(np.abs(B @ qd + c)))
         allowed = tol * max(1.0, float(np.max(np.abs(B))) * float(np.max(np.abs(qd))))
         if violation > allowed:

@@ -34,6 +34,7 @@ from . import codegen
 from .assembly import assemble
 from .codegen.layouts import split_terms
 from .inverse import solve_inverse_dynamics
+from .parameters import ParameterValues
 from .results import ForwardDynamicsBatch, ForwardDynamicsResult, InverseDynamicsResult
 from .tolerances import RANK_RTOL, check_rank_rtol
 
@@ -109,10 +110,9 @@ class NumericModel:
         self.coordinate_names = tuple(q.name for q in equations.coordinates)
         self._coordinate_index = {name: i for i, name in enumerate(self.coordinate_names)}
         self.parameter_names = tuple(p.name for p in equations.parameters)
-        self._p, self._time_varying = self._resolve(parameters)
-        self.time_varying = bool(self._time_varying)
+        self._use(ParameterValues.resolve(equations, parameters))
         check_parameter_values(equations.system, dict(zip(self.parameter_names, self.parameter_vector(0.0))))
-        self._check_finite()
+        self._parameters.check_finite()
         self._source = codegen.KernelSource(equations)
         self._libraries: dict[str, codegen.KernelLibrary] = {}
         self._evaluators: dict[str, Callable[..., np.ndarray]] = {}
@@ -131,44 +131,20 @@ class NumericModel:
 
     # -- parameters -----------------------------------------------------------------------
 
-    def _resolve(self, parameters: Mapping) -> tuple[np.ndarray, list[tuple[int, Callable]]]:
-        index = {name: i for i, name in enumerate(self.parameter_names)}
-        given = dict(zip(name_indices(list(parameters), index, "parameter(s)"), parameters.values()))
-        missing = [name for name, i in index.items() if i not in given]
-        if missing:
-            raise InputError(f"missing value(s) for parameter(s): {', '.join(missing)}")
-        values = np.zeros(len(index))
-        time_varying = []
-        for i, value in given.items():
-            if callable(value):
-                time_varying.append((i, value))
-                continue
-            try:
-                values[i] = float(value)
-            except (TypeError, ValueError) as error:
-                raise InputError(f"parameter {self.parameter_names[i]}: expected a number or a callable "
-                                 f"f(t), got {value!r}") from error
+    def _use(self, parameters: ParameterValues) -> None:
+        """Take ``parameters``; ``_constants`` is their vector when none varies in time (the per-call fast
+        path of the accessors and forward dynamics), else None."""
+        self._parameters = parameters
+        self._constants = None if parameters.time_varying else parameters.constants
 
-        eq = self.equations
-        frozen = [self.parameter_names[i] for i, _ in time_varying
-                  if any(getattr(eq, name).has(eq.parameters[i]) for name in ("M", "Phi", "A", "b"))]
-        if frozen:
-            raise InputError(f"parameter(s) {', '.join(frozen)} enter M or the constraints and cannot vary "
-                             "with time (the equations would need their time derivatives)")
-        return values, time_varying
-
-    def _check_finite(self) -> None:
-        """ValueError naming the first constant parameter that is not a finite number."""
-        bad = [name for name, value in zip(self.parameter_names, self._p) if not np.isfinite(value)]
-        if bad:
-            raise InputError(f"parameter {bad[0]}: expected a finite number, got {self._p[self.parameter_names.index(bad[0])]!r}")
+    @property
+    def time_varying(self) -> bool:
+        """Some parameter is a callable of ``t``."""
+        return bool(self._parameters.time_varying)
 
     def parameter_vector(self, t: float = 0.0) -> np.ndarray:
         """Parameter values ``p`` at time ``t`` (order of ``parameter_names``), shape (P,)."""
-        p = self._p.copy()
-        for i, function in self._time_varying:
-            p[i] = float(function(t))
-        return p
+        return self._parameters.vector(t).copy()
 
     # -- code ------------------------------------------------------------------------------
 
@@ -285,7 +261,7 @@ class NumericModel:
 
     def _evaluate(self, name: str, q, qd, t: float) -> np.ndarray:
         evaluator = self._evaluators.get(name) or self._evaluator(name)
-        return evaluator(t, q, qd, self.parameter_vector(t) if self._time_varying else self._p)
+        return evaluator(t, q, qd, self._parameters.vector(t) if self._constants is None else self._constants)
 
     def _states(self, value, what: str) -> np.ndarray:
         states = np.ascontiguousarray(value, dtype=float)
@@ -298,65 +274,9 @@ class NumericModel:
         times = np.array(t, dtype=float)  # a copy, contiguous, 0-d for a number
         if times.shape not in ((), (n,)):
             raise InputError(f"t must be a number or have shape ({n},), got {times.shape}")
-        if not self._time_varying:
-            return times, self._p
-        if times.ndim == 0:
-            return times, self.parameter_vector(float(times))
-        return times, np.array([self.parameter_vector(time) for time in times]).reshape(n, len(self._p))
+        return times, self._parameters.batch(times)
 
-    # -- matrices --------------------------------------------------------------------------
-
-    def M(self, q, t: float = 0.0) -> np.ndarray:
-        """Mass matrix ``M(q)``, shape (m, m)."""
-        return self._evaluate("M", q, None, t)
-
-    def C(self, q, qd, t: float = 0.0) -> np.ndarray:
-        """Coriolis matrix of Eq. 22, ``C = dM/dq (I ⊗ qd) - 1/2 (dM/dq (qd ⊗ I))^T``, shape (m, m)."""
-        return self._evaluate("C", q, qd, t)
-
-    def C_christoffel(self, q, qd, t: float = 0.0) -> np.ndarray:
-        """Christoffel-symbol Coriolis matrix (same ``C qd``; ``Md - 2 C`` skew), shape (m, m)."""
-        return self._evaluate("C_christoffel", q, qd, t)
-
-    def g(self, q, t: float = 0.0) -> np.ndarray:
-        """Gravity/potential forces ``g = (dPi/dq)^T``, shape (m,)."""
-        return self._evaluate("g", q, None, t)
-
-    def Phi(self, q, t: float = 0.0) -> np.ndarray:
-        """Holonomic constraints ``f(q)``, shape (r,)."""
-        return self._evaluate("Phi", q, None, t)
-
-    def Phi_q(self, q, t: float = 0.0) -> np.ndarray:
-        """Constraint Jacobian ``Phi_q = df/dq``, shape (r, m)."""
-        return self._evaluate("Phi_q", q, None, t)
-
-    def Phi_t(self, q, t: float = 0.0) -> np.ndarray:
-        """``Phi_t = df/dt`` (nonzero for drives; ``Phi_q qd + Phi_t = 0``), shape (r,)."""
-        return self._evaluate("Phi_t", q, None, t)
-
-    def A(self, q, t: float = 0.0) -> np.ndarray:
-        """Nonholonomic constraint matrix ``A(q)``, shape (s, m)."""
-        return self._evaluate("A", q, None, t)
-
-    def b(self, q, t: float = 0.0) -> np.ndarray:
-        """Nonholonomic constraint offset ``b(q)``, shape (s,)."""
-        return self._evaluate("b", q, None, t)
-
-    def f_Q(self, q, qd, t: float = 0.0) -> np.ndarray:
-        """Generalized non-conservative forces ``f_Q(q, qd, t)``, shape (m,)."""
-        return self._evaluate("f_Q", q, qd, t)
-
-    def Cqd(self, q, qd, t: float = 0.0) -> np.ndarray:
-        """Velocity terms ``C(q, qd) qd``, shape (m,)."""
-        return self._evaluate("Cqd", q, qd, t)
-
-    def gamma(self, q, qd, t: float = 0.0) -> np.ndarray:
-        """``gamma = -(dPhi_q/dt) qd - 2 Phi_qt qd - Phi_tt`` (so that ``Phi_q qdd = gamma``), shape (r,)."""
-        return self._evaluate("gamma", q, qd, t)
-
-    def gamma_nh(self, q, qd, t: float = 0.0) -> np.ndarray:
-        """``gamma_nh = -(dA/dt) qd - db/dt`` (so that ``A qdd = gamma_nh``), shape (s,)."""
-        return self._evaluate("gamma_nh", q, qd, t)
+    # -- matrices: one accessor per matrix of the catalogue (M, C, g, Phi, ...), defined below the class
 
     def kinetic_energy(self, q, qd, t: float = 0.0) -> float:
         """``T = 1/2 qd^T M(q) qd``."""
@@ -405,7 +325,7 @@ class NumericModel:
         SingularConfigurationError
             M is not positive definite on the null space of ``[Phi_q; A]``.
         """
-        parameters = self.parameter_vector(t) if self._time_varying else self._p
+        parameters = self._parameters.vector(t) if self._constants is None else self._constants
         qdd, lam, mu, rank = self._forward(t, q, qd, parameters, alpha, beta)
         if rank < 0:
             raise SingularConfigurationError(q, qd, t)
@@ -493,13 +413,10 @@ class NumericModel:
             M qdd + C qd + g - f_Q + Phi_q^T lambda + A^T mu = B u
 
         where column ``j`` of ``B`` (m, n_a) selects the coordinate ``actuated[j]``;
-        ``lambda`` and ``mu`` have the sign of Eq. 23 (as in :meth:`forward_dynamics`).
-        With ``N`` (m, m - rho) spanning the null space of ``G = [Phi_q; A]`` (the
-        rank policy of :mod:`kronlag.tolerances`), ``u`` is the minimum-norm solution of
-        ``N^T B u = N^T (M qdd + C qd + g - f_Q)`` and ``[lambda; mu]`` the minimum-norm
-        solution of ``G^T [lambda; mu] = B u - (M qdd + C qd + g - f_Q)``.  More
-        actuators than degrees of freedom (``m - rho``): the forces are not unique and
-        the minimum-norm split is returned with an :class:`ActuationWarning`.
+        ``lambda`` and ``mu`` have the sign of Eq. 23 (as in :meth:`forward_dynamics`); the
+        minimum-norm solutions of :mod:`kronlag.numeric.inverse`.  More actuators than degrees
+        of freedom: the forces are not unique, the minimum-norm split comes with an
+        :class:`~kronlag.ActuationWarning`.
 
         Parameters
         ----------
@@ -595,9 +512,7 @@ class NumericModel:
 
     def parameter_values(self) -> dict[str, float | Callable]:
         """The parameter values by name: floats, and the callables ``f(t)`` of time-varying ones."""
-        values: dict[str, float | Callable] = dict(zip(self.parameter_names, self._p.tolist()))
-        values.update({self.parameter_names[i]: function for i, function in self._time_varying})
-        return values
+        return self._parameters.as_dict()
 
     def with_parameters(self, values: Mapping | None = None, **by_name) -> NumericModel:
         """A model with some parameter values changed, sharing this one's generated and compiled code.
@@ -619,9 +534,8 @@ class NumericModel:
             changed[name] = given[key]
         variant = object.__new__(NumericModel)  # not copy.copy: that would pickle (and rebuild) the code
         variant.__dict__.update(self.__dict__)
-        variant._p, variant._time_varying = self._resolve(changed)
-        variant._check_finite()
-        variant.time_varying = bool(variant._time_varying)
+        variant._use(ParameterValues.resolve(self.equations, changed))
+        variant._parameters.check_finite()
         variant._warned_redundant = False
         return variant
 
@@ -640,7 +554,7 @@ class NumericModel:
         self.__init__(state["equations"], state["parameters"], backend=state["backend"],
                       rank_rtol=state.get("rank_rtol", RANK_RTOL))
 
-    # -- static equilibrium and linearization (kronlag.analysis) --------------------------------
+    # -- static equilibrium and linearization (kronlag.studies) ---------------------------------
 
     def equilibrium(self, q_guess, *, fixed: Mapping | None = None, **options):
         """Static equilibrium near ``q_guess``; see :func:`kronlag.analysis.equilibrium`."""
@@ -653,6 +567,27 @@ class NumericModel:
         from ..studies.linearization import linearize
 
         return linearize(self, q, qd, t=t, **options)
+
+
+
+def _accessor(entry: catalogue.EquationMatrix) -> Callable[..., np.ndarray]:
+    """The method ``model.<name>(q[, qd], t=0.0)`` of a matrix of the catalogue, with its docstring."""
+    name = entry.name
+    if entry.speeds:
+        def accessor(self: NumericModel, q, qd, t: float = 0.0) -> np.ndarray:
+            return self._evaluate(name, q, qd, t)
+    else:
+        def accessor(self: NumericModel, q, t: float = 0.0) -> np.ndarray:
+            return self._evaluate(name, q, None, t)
+    shape = f"({entry.rows},)" if entry.vector else f"({entry.rows}, {entry.columns})"
+    accessor.__name__ = accessor.__qualname__ = name
+    accessor.__doc__ = f"``{name}``: {entry.meaning}, shape {shape}."
+    return accessor
+
+
+for _entry in catalogue.MATRICES.values():
+    if _entry.accessor and _entry.name != "potential_energy":  # a float, see NumericModel.potential_energy
+        setattr(NumericModel, _entry.name, _accessor(_entry))
 
 
 def _blocks(kernel: codegen.Kernel, flat: np.ndarray) -> dict[str, np.ndarray]:

@@ -16,7 +16,7 @@ limits of :mod:`.tolerances` as macros.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -46,12 +46,15 @@ class PositionProjection:
     iterations : int
     stalled : bool
         The last step was at rounding level: ``residual`` is as small as ``q`` allows.
+    terms : dict
+        :meth:`NumericModel.dynamics_terms` at ``q`` (zero speeds), for :func:`project_velocities`.
     """
 
     q: np.ndarray
     residual: float
     iterations: int
     stalled: bool
+    terms: Mapping[str, np.ndarray]
 
     def accepted(self, tol: float) -> bool:
         """Converged to ``tol``, or as close as rounding allows."""
@@ -88,6 +91,9 @@ def project_positions(model: NumericModel, q, t: float, *, tol: float, free: Seq
     residual, stalled, iterations = _residual(terms["Phi"]), False, 0
     while residual > tol and not stalled and iterations < max_iterations and model.r:
         step = least_norm(terms["Phi_q"][:, free], -terms["Phi"], rank_rtol=model.rank_rtol)
+        if np.all(np.abs(step) <= STALL * (1 + np.abs(q[free]))):
+            stalled = True  # the correction is at rounding level: Phi is as small as q allows
+            break
         factor = 1.0
         while True:
             trial = q.copy()
@@ -100,18 +106,21 @@ def project_positions(model: NumericModel, q, t: float, *, tol: float, free: Seq
         if not trial_residual < residual:
             break  # no descent along the Gauss-Newton direction
         iterations += 1
-        stalled = bool(np.all(np.abs(factor * step) <= STALL * (1 + np.abs(trial[free]))))
         q, terms, residual = trial, trial_terms, trial_residual
-    return PositionProjection(q, residual, iterations, stalled)
+    return PositionProjection(q, residual, iterations, stalled, terms)
 
 
-def project_velocities(model: NumericModel, q, qd, t: float, *, free: Sequence[int] | None = None) -> np.ndarray:
+def project_velocities(model: NumericModel, q, qd, t: float, *, free: Sequence[int] | None = None,
+                       terms: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
     """``qd`` changed least, in the speeds ``free`` (default: all), so that ``B qd + c = 0``
-    (``B = [Phi_q; A]``, ``c = [Phi_t; b]`` at ``(q, t)``), shape (m,)."""
+    (``B = [Phi_q; A]``, ``c = [Phi_t; b]`` at ``(q, t)``; ``terms``: :meth:`NumericModel.dynamics_terms`
+    there when already at hand), shape (m,)."""
     qd = np.array(qd, dtype=float)
     if not model.r + model.s:
         return qd
     free = list(range(model.m)) if free is None else list(free)
-    B, c = velocity_constraints(model.dynamics_terms(np.asarray(q, dtype=float), np.zeros(model.m), t))
+    if terms is None:
+        terms = model.dynamics_terms(np.asarray(q, dtype=float), np.zeros(model.m), t)
+    B, c = velocity_constraints(terms)
     qd[free] -= least_norm(B[:, free], B @ qd + c, rank_rtol=model.rank_rtol)
     return qd

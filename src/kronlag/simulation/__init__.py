@@ -11,7 +11,9 @@ method (:mod:`.solvers`, one a module; each declares its formulation and order) 
 multipliers, energies and constraint residuals at the output times and returns a
 :class:`~kronlag.simulation.trajectory.Trajectory`.  The Python-driven methods share
 one stepping loop (:mod:`.stepping`); the compiled ones share the drivers of
-:mod:`.drivers` (C in ``simulation/c/``).
+:mod:`.drivers` (C in ``simulation/c/``; the options struct they take and the codes they return
+are declared once, in :mod:`.interface`, and printed as C).  A solver's ``order`` is a number
+(:class:`Solver`), checked against closed-form solutions by ``tests/test_solver_order.py``.
 """
 
 from ..core.errors import InitialStateWarning, ProjectionError

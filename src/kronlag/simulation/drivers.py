@@ -1,13 +1,19 @@
 """The compiled integrators' drivers: C files appended to the model's C source, compiled once per
-model, called through ctypes; their outputs and flags turned into segments of a solution."""
+model, called through ctypes with one :class:`~.interface.DriverOptions`; their outputs and return
+codes turned into segments of a solution.
+
+A compiled integrator is a C file in ``simulation/c/`` defining ``int kronlag_<name>(kronlag_options *)``
+and an entry in :data:`DRIVERS`; :func:`run` calls it."""
 
 from __future__ import annotations
 
 import ctypes
+import math
 import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import lru_cache
+from itertools import accumulate
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -16,6 +22,7 @@ import numpy as np
 from ..core.errors import CompilerError, InputError
 from ..numeric import codegen
 from ..numeric.tolerances import numerical_rank
+from .interface import DriverOptions, Progress, c_declarations, doubles
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions
 from .stepping import SUCCESS, approach_text
 from .trajectory import Result, SingularPassage
@@ -23,14 +30,12 @@ from .trajectory import Result, SingularPassage
 if TYPE_CHECKING:
     from ..numeric.numeric_model import NumericModel
 
-__all__ = ["driver", "Segment", "output_rows", "segment_status", "solution_of", "require"]
+__all__ = ["DRIVERS", "Driver", "driver", "run", "Segment", "output_rows", "segment_status", "solution_of",
+           "require"]
 
 
 _SUNDIALS_LIBRARIES = ("sundials_core", "sundials_nvecserial", "sundials_sunmatrixdense",
                        "sundials_sunlinsoldense", "sundials_cvode")
-
-
-_PROGRESS = ctypes.CFUNCTYPE(None, ctypes.c_double)
 
 
 #: Most singular passages stored per run segment (more are counted).
@@ -66,17 +71,38 @@ def _driver_library(source: str) -> ctypes.CDLL:
     return ctypes.CDLL(str(codegen.compile_shared_library(source)))
 
 
-#: The drivers of the compiled methods: the kernels each appends to ``model.c_source`` (after the
-#: monitor), its C file, its entry point and the argument types of the entry point.
-_P, _D, _I, _L = ctypes.c_void_p, ctypes.c_double, ctypes.c_int, ctypes.c_long
+@dataclass(frozen=True)
+class Driver:
+    """A compiled integrator.
+
+    Attributes
+    ----------
+    file : str
+        Its C file in ``simulation/c/``, defining ``int <entry>(kronlag_options *options)``.
+    entry : str
+    kernels : tuple of str
+        The model's kernels it calls besides the dynamics (appended to ``model.c_source``).
+    label : str
+        The integrator's name in failure messages.
+    sundials : bool
+        It calls SUNDIALS (loaded first from scikit-sundae).
+    flag_names : str or None
+        A C function ``const char *(int)`` naming its return codes that are no :class:`Result`'s.
+    """
+
+    file: str
+    entry: str
+    kernels: tuple[str, ...]
+    label: str
+    sundials: bool = False
+    flag_names: str | None = None
 
 
-_DRIVERS = {
-    "cvode": (("potential_energy", "Phi_q"), "cvode.c", "kronlag_cvode",
-              [_P, _D, _D, _P, _I, _P, _D, _D, _D, _D, _D, _L, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _PROGRESS]),
-    "index3": (("tangent", "potential_energy"), "index3.c", "kronlag_index3",
-               [_P, _I, _D, _D, _P, _P, _P, _I, _P, _D, _D, _D, _D, _L, _I, _I] + [_P] * 10
-               + [_I, _P, _P, _P, _PROGRESS]),
+#: The compiled integrators by name.
+DRIVERS = {
+    "cvode": Driver("cvode.c", "kronlag_cvode", ("potential_energy", "Phi_q"), "CVODE", sundials=True,
+                    flag_names="kronlag_cvode_flag_name"),
+    "index3": Driver("index3.c", "kronlag_index3", ("tangent", "potential_energy"), "ALI3-P"),
 }
 
 
@@ -85,27 +111,27 @@ _LOADED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
-    """The shared library of ``model`` with the driver ``kind`` of :data:`_DRIVERS`."""
+    """The shared library of ``model`` with the driver ``kind`` of :data:`DRIVERS`: the model's C
+    source, the kernels, :func:`~.interface.c_declarations`, ``monitor.c`` and the driver's file."""
     libraries = _LOADED.setdefault(model, {})
     if kind not in libraries:
-        kernels, file, entry, argtypes = _DRIVERS[kind]
-        if kind == "cvode":
+        spec = DRIVERS[kind]
+        if spec.sundials:
             _load_sundials()
-        library = _driver_library(model.c_source + model.c_kernels(*kernels) + _c_file("monitor.c") + _c_file(file))
-        function = getattr(library, entry)
-        function.argtypes, function.restype = argtypes, ctypes.c_int
-        if kind == "cvode":
-            library.kronlag_outputs.argtypes = [_P, _I] + [_P] * 9
-            library.kronlag_outputs.restype = None
-            library.kronlag_cvode_flag_name.argtypes = [_I]
-            library.kronlag_cvode_flag_name.restype = ctypes.c_char_p
+        library = _driver_library(model.c_source + model.c_kernels(*spec.kernels) + c_declarations()
+                                  + _c_file("monitor.c") + _c_file(spec.file))
+        function = getattr(library, spec.entry)
+        function.argtypes, function.restype = [ctypes.POINTER(DriverOptions)], ctypes.c_int
+        if spec.flag_names:
+            names = getattr(library, spec.flag_names)
+            names.argtypes, names.restype = [ctypes.c_int], ctypes.c_char_p
         libraries[kind] = library
     return libraries[kind]
 
 
 def passage(model: NumericModel, record: np.ndarray) -> SingularPassage:
     """A :class:`SingularPassage` from a record ``[t_enter, t_exit, t, ratio, row, q (m)]`` of
-    ``src/kronlag/c/monitor.c``; the constraints involved are read off the left singular vector of
+    ``src/kronlag/simulation/c/monitor.c``; the constraints involved are read off the left singular vector of
     ``Phi_q`` that belongs to the singular value that (nearly) vanished, the one at the start's rank."""
     t_enter, t_exit, t, ratio, row = record[:5]
     q = np.array(record[5:5 + model.m])
@@ -121,7 +147,8 @@ def passage(model: NumericModel, record: np.ndarray) -> SingularPassage:
 @dataclass(eq=False)
 class Segment:
     """What one call of a compiled driver produced: outputs, counters, events and where it ended
-    (``flag``: 0 at ``t1``, positive for a hand-over, negative for a failure)."""
+    (``flag``: 0 at ``t1``, positive for a hand-over, negative for a failure: :class:`Result` codes
+    and :data:`~.interface.HANDBACK`)."""
 
     t: np.ndarray
     y: np.ndarray
@@ -133,6 +160,13 @@ class Segment:
     steps: int
     nfev: int
     njev: int
+    #: Lowest and highest order used ((0, 0): a fixed-order driver).
+    orders: tuple[int, int] = (0, 0)
+
+    @property
+    def hands_over(self) -> bool:
+        """It ended for the other method of the switching solver to continue."""
+        return self.flag > 0
 
     def without_first_row(self) -> Segment:
         """The segment without its first output (the hand-over state, already output)."""
@@ -148,28 +182,64 @@ def output_rows(problem: MultibodyProblem, t0: float, options: SolverOptions) ->
     return times, len(times)
 
 
-#: The flags of the C drivers (``src/kronlag/c/cvode.c``, ``index3.c``) that are not CVODE's own:
-#: what each means.
-_DRIVER_RESULTS = {
-    "cvode": {-1: Result.MAX_STEPS, 2: Result.APPROACH, -1002: Result.PROJECTION_FAILED,
-              -1003: Result.SINGULAR, -1004: Result.OUTPUTS_FULL},
-    "index3": {-1: Result.MAX_STEPS, -2: Result.STEP_TOO_SMALL, -3: Result.NEWTON_FAILED,
-               -6: Result.SINGULAR, -7: Result.OUTPUTS_FULL},
-}
+def _buffers(model: NumericModel, rows: int) -> dict[str, np.ndarray]:
+    """The output buffers of :class:`~.interface.DriverOptions` by field name: ``t_out`` (rows,),
+    ``y_out`` (rows, 2 m), the derived quantities of :class:`Solution` (rows, ...), ``events`` and
+    ``y_end``; C-contiguous parts of one block (one allocation: with outputs at every step, ``rows``
+    is large and the driver touches only the rows it writes)."""
+    m, r, s = model.m, model.r, model.s
+    shapes = {"t_out": (rows,), "y_out": (rows, 2 * m), "qdd": (rows, m), "lam": (rows, r), "mu": (rows, s),
+              "kinetic_energy": (rows,), "potential_energy": (rows,), "position_residual": (rows, r),
+              "velocity_residual": (rows, r + s), "events": (_MAX_EVENTS, 5 + m), "y_end": (2 * m,)}
+    ends = list(accumulate((math.prod(shape) for shape in shapes.values()), initial=0))
+    block = np.empty(ends[-1])
+    return {name: block[start:end].reshape(shape) for (name, shape), start, end in zip(shapes.items(), ends, ends[1:])}
+
+
+def run(kind: str, problem: MultibodyProblem, options: SolverOptions, t0: float, y0: np.ndarray,
+        **inputs: float | np.ndarray) -> Segment:
+    """The driver ``kind`` of :data:`DRIVERS` from the consistent state ``(t0, y0)`` (2 m,).
+
+    ``inputs`` set fields of :class:`~.interface.DriverOptions` beyond those that follow from
+    ``problem`` and ``options`` (or replace them, e.g. a scaled ``rtol``); arrays are passed as
+    ``double *``.
+    """
+    model = problem.model
+    library = driver(model, kind)
+    times, rows = output_rows(problem, t0, options)
+    buffers = _buffers(model, rows)
+    p = model.parameter_vector(t0)
+    arrays = {"p": p, "y0": y0, "t_eval": times}
+    arrays |= {name: value for name, value in inputs.items() if isinstance(value, np.ndarray)}
+    arrays = {name: np.ascontiguousarray(value, dtype=float) for name, value in arrays.items()}
+    fields = {"n_parameters": len(p), "t0": t0, "t1": problem.t1, "rtol": options.rtol, "atol": options.atol,
+              "max_step": options.max_step if np.isfinite(options.max_step) else 0.0, "max_steps": options.max_steps,
+              "max_order": options.max_order or 0, "n_eval": len(times), "max_rows": rows, "max_events": _MAX_EVENTS,
+              "t_end": t0, "progress": Progress(options.progress) if options.progress is not None else Progress()}
+    fields |= {name: value for name, value in inputs.items() if name not in arrays}
+    arguments = DriverOptions(**fields, **{name: doubles(array) for name, array in (arrays | buffers).items()})
+    flag = getattr(library, DRIVERS[kind].entry)(ctypes.byref(arguments))
+    n = arguments.n_out
+    outputs = {name: buffers[name][:n].copy() for name in ("t_out", "y_out", *Solution.DERIVED)}
+    passages = tuple(passage(model, record) for record in buffers["events"][:min(arguments.n_events, _MAX_EVENTS)])
+    return Segment(t=outputs.pop("t_out"), y=outputs.pop("y_out"), derived=outputs, events=passages, flag=flag,
+                   t_end=arguments.t_end, y_end=buffers["y_end"].copy(), steps=arguments.steps, nfev=arguments.nfev,
+                   njev=arguments.njev, orders=(arguments.lowest_order, arguments.highest_order))
 
 
 def segment_status(segment: Segment, model: NumericModel, kind: str) -> tuple[Result, str]:
     """The :class:`Result` of a driver's ``segment`` and the message: ``Integration failed at t = ...,
     q = ...: reason[; the last singular passage]``."""
-    if segment.flag == 0:
-        return Result.SUCCESS, SUCCESS
+    result = Result.of_code(segment.flag)
+    if result is Result.SUCCESS:
+        return result, SUCCESS
     q = segment.y_end[:model.m]
-    result = _DRIVER_RESULTS[kind].get(segment.flag, Result.SOLVER_FAILED)
     if result is Result.APPROACH:
         return result, approach_text(segment.t_end, q)
-    reason = result.value
-    if result is Result.SOLVER_FAILED:
-        reason = f"CVODE {driver(model, 'cvode').kronlag_cvode_flag_name(segment.flag).decode()} ({segment.flag})"
+    reason, spec = result.value, DRIVERS[kind]
+    if result is Result.SOLVER_FAILED and spec.flag_names:
+        name = getattr(driver(model, kind), spec.flag_names)(segment.flag).decode()
+        reason = f"{spec.label} {name} ({segment.flag})"
     message = f"Integration failed at t = {segment.t_end:.6g}, q = {np.array2string(q, precision=6)}: {reason}"
     return result, message + (f"; last passage: {segment.events[-1]}" if segment.events else "")
 
@@ -185,5 +255,6 @@ def solution_of(segments: Sequence[Segment], result: Result, message: str) -> So
 
 
 def require(solver: Solver, model: NumericModel) -> None:
+    """Raise :class:`InputError` if ``solver`` cannot run ``model`` (saying what it needs)."""
     if not solver.supports(model):
         raise InputError(f"method={solver.name!r} cannot run this model: {solver.requirements}")

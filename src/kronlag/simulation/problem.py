@@ -89,7 +89,8 @@ class MultibodyProblem:
             raise ProjectionError(f"the position projection did not converge at t = {t!r}, "
                                   f"q = {positions.q.tolist()}: max |Phi| = {positions.residual:.3g} after "
                                   f"{positions.iterations} Gauss-Newton steps (tol {tol:.3g})", positions.residual)
-        return np.concatenate([positions.q, project_velocities(self.model, positions.q, y[m:], t)])
+        return np.concatenate([positions.q, project_velocities(self.model, positions.q, y[m:], t,
+                                                               terms=positions.terms)])
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,6 +124,10 @@ class Solution:
     derived: dict[str, np.ndarray] | None = None
     events: tuple[SingularPassage, ...] = ()
 
+    #: The keys of :attr:`derived`.
+    DERIVED: ClassVar[tuple[str, ...]] = ("qdd", "lam", "mu", "kinetic_energy", "potential_energy",
+                                          "position_residual", "velocity_residual")
+
     @property
     def status(self) -> int:
         """0 success, -1 failure (``result.status``)."""
@@ -131,13 +136,19 @@ class Solution:
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """Options common to every solver (see :func:`simulate`)."""
+    """Options common to every solver (see :func:`simulate`).
+
+    ``max_order`` caps the order of a variable-order method (None: it uses every order up to its
+    :attr:`Solver.order`); :func:`simulate` leaves it None, a :class:`Solver` subclass may set it
+    (the order tests do, to check each order).
+    """
 
     rtol: float
     atol: float
     max_step: float
     max_steps: int
     progress: Callable[[float], object] | None
+    max_order: int | None = None
 
     @property
     def projection_tol(self) -> float:
@@ -148,18 +159,41 @@ class SolverOptions:
 class Solver(ABC):
     """A time-integration method for a :class:`MultibodyProblem`.
 
-    Subclasses declare ``name``, ``formulation`` (the equations integrated),
-    ``order`` and, where they need more than any model, ``requirements`` and
-    :meth:`supports`, and implement :meth:`solve`.
+    Subclasses declare ``name``, ``formulation`` (the equations integrated), ``integrator``
+    (the scheme, in words), ``order`` and, where they need more than any model,
+    ``requirements`` and :meth:`supports`, and implement :meth:`solve`.  A subclass can be
+    passed to :func:`simulate` as ``method`` (like scipy's ``solve_ivp`` takes an ``OdeSolver``).
+
+    The order is a number: the global error of a fixed-order method falls like ``h^order``
+    with the step ``h``.  A variable-order method (CVODE's Adams-Moulton, IDA's BDF, the
+    switching method) chooses its order step by step between ``min_order`` and ``order`` (its
+    highest); with its order capped at ``q`` (``SolverOptions.max_order``) its error falls like
+    ``h^q``.  A class that declares ``order`` alone has a fixed order: ``min_order`` follows
+    (``tests/test_solver_order.py`` checks every declaration).
     """
 
     name: ClassVar[str]
     formulation: ClassVar[str]
-    order: ClassVar[str]
+    #: The integration scheme and where it comes from, in words.
+    integrator: ClassVar[str]
+    #: The order of convergence; the highest order of a variable-order method.
+    order: ClassVar[int]
+    #: The lowest order a variable-order method uses (``order`` for a fixed-order method).
+    min_order: ClassVar[int]
     #: What a model needs for this method (said when :meth:`supports` is False).
     requirements: ClassVar[str] = "nothing"
     #: Default Baumgarte ``alpha`` and ``beta`` of the index-1 ODE it integrates (0: none).
     stabilization: ClassVar[float] = 0.0
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if "order" in vars(cls) and "min_order" not in vars(cls):
+            cls.min_order = cls.order
+
+    @classmethod
+    def variable_order(cls) -> bool:
+        """Whether the method chooses its order between ``min_order`` and ``order``."""
+        return cls.min_order < cls.order
 
     @staticmethod
     def supports(model: NumericModel) -> bool:
@@ -174,4 +208,5 @@ class Solver(ABC):
         """Integrate ``problem``; failures are reported in the solution, not raised."""
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}(formulation={self.formulation!r}, order={self.order!r})"
+        orders = f"{self.min_order}-{self.order}" if self.variable_order() else f"{self.order}"
+        return f"{type(self).__name__}(formulation={self.formulation!r}, order={orders}, {self.integrator})"

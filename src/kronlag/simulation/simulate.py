@@ -4,6 +4,7 @@ of :data:`~kronlag.simulation.solvers.METHODS` and the derived quantities into a
 
 from __future__ import annotations
 
+import inspect
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -15,7 +16,7 @@ import numpy as np
 
 from ..core.errors import AssemblyError, InitialStateWarning, InputError, SingularConfigurationError
 from ..numeric.linalg import velocity_constraints
-from .problem import MultibodyProblem, Solution, SolverOptions
+from .problem import MultibodyProblem, Solution, Solver, SolverOptions
 from .solvers import AUTO_PREFERENCE, METHODS
 from .trajectory import Trajectory
 
@@ -71,7 +72,7 @@ def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, star
                       events=solution.events, result=solution.result)
 
 
-def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, method: str = "auto",
+def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, method: str | type[Solver] = "auto",
              rtol: float = 1e-8, atol: float = 1e-10, t_eval=None, alpha: float | None = None,
              beta: float | None = None, max_step: float | None = None, max_steps: int | None = None,
              progress: Callable[[float], object] | None = None) -> Trajectory:
@@ -94,8 +95,9 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         Initial coordinates and velocities.  They should satisfy the
         constraints (``model.assemble`` finds such values); they are projected
         onto ``Phi(q, t0) = 0``, ``Phi_q qd + Phi_t = 0``, ``A qd + b = 0`` before starting.
-    method : {'auto', 'switching', 'ali3p', 'compiled', 'baumgarte', 'projection', 'ggl'}
-        Formulation and integrator:
+    method : {'auto', 'switching', 'ali3p', 'compiled', 'baumgarte', 'projection', 'ggl'} or Solver subclass
+        Formulation and integrator (a :class:`~kronlag.simulation.Solver` subclass: that one,
+        as scipy's ``solve_ivp`` takes an ``OdeSolver`` subclass):
 
         ``'switching'``
             ``'compiled'`` away from singular configurations, ``'ali3p'``
@@ -174,8 +176,8 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         max_steps = span_steps
     if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 1):
         raise InputError(f"max_steps must be an integer >= 1, got {max_steps!r}")
-    name = _resolve_method(method, model)
-    default_stabilization = METHODS[name].stabilization
+    solver = _resolve_method(method, model)
+    default_stabilization = solver.stabilization
     options = SolverOptions(rtol=rtol, atol=atol, max_step=np.inf if max_step is None else float(max_step),
                             max_steps=int(max_steps), progress=progress)
     start = MultibodyProblem(model=model, t0=t0, t1=t1, q0=np.asarray(q0, dtype=float).ravel(),
@@ -190,8 +192,8 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         if bad:
             raise InputError(f"{label} is not finite for {', '.join(bad)}")
     problem = replace(start, **dict(zip(("q0", "qd0"), _consistent_start(start, options))))
-    solution = METHODS[name](options).solve(problem)
-    return _trajectory(solution, problem, name, started)
+    solution = solver(options).solve(problem)
+    return _trajectory(solution, problem, solver.name, started)
 
 
 #: The default ``max_steps``: this many per unit of simulated time, at least 100 000.
@@ -226,9 +228,16 @@ def _consistent_start(problem: MultibodyProblem, options: SolverOptions) -> tupl
     return y0[:m], y0[m:]
 
 
-def _resolve_method(method: str, model: NumericModel) -> str:
-    if method == "auto":
-        return next(name for name in AUTO_PREFERENCE if METHODS[name].supports(model))
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; choose from 'auto', {', '.join(map(repr, METHODS))}")
-    return method
+def _resolve_method(method: str | type[Solver], model: NumericModel) -> type[Solver]:
+    """The solver class ``method`` names (``"auto"``: the first of :data:`AUTO_PREFERENCE` that
+    supports ``model``), or ``method`` itself if it is a concrete :class:`Solver` subclass."""
+    if isinstance(method, type) and issubclass(method, Solver):
+        if inspect.isabstract(method) or not isinstance(getattr(method, "name", None), str):
+            raise InputError(f"method={method.__name__} is not a complete Solver: it must define name and solve()")
+        return method
+    if isinstance(method, str) and method == "auto":
+        return next(METHODS[name] for name in AUTO_PREFERENCE if METHODS[name].supports(model))
+    if isinstance(method, str) and method in METHODS:
+        return METHODS[method]
+    raise InputError(f"unknown method {method!r}; choose from 'auto', {', '.join(map(repr, METHODS))} "
+                     "or pass a Solver subclass")

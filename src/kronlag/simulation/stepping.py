@@ -46,7 +46,7 @@ class Stepper(ABC):
 
 
 class ApproachWatch:
-    """The watch of ``src/kronlag/c/monitor.c`` for the Python-driven index-1 methods: the
+    """The watch of ``src/kronlag/simulation/c/monitor.c`` for the Python-driven index-1 methods: the
     singular ratio of ``Phi_q`` (:func:`kronlag.tolerances.singular_ratio`) at every accepted step,
     the next step limited so that the ratio, extrapolated, keeps half its value, and the approach
     to a singular configuration (ratio below :data:`~kronlag.tolerances.APPROACH_RTOL`)."""

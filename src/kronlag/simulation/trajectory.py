@@ -30,26 +30,45 @@ __all__ = ["Trajectory", "SingularPassage", "Result"]
 class Result(enum.Enum):
     """How an integration ended; the value is the message (``Trajectory.message`` adds where).
 
-    ``status`` is 0 for :attr:`SUCCESS` and -1 for every other result.
+    ``status`` is 0 for :attr:`SUCCESS` and -1 for every other result.  :attr:`code` is the
+    number a compiled driver returns for it, ``KRONLAG_RESULT_<NAME>`` in their C
+    (:mod:`kronlag.simulation.interface` prints the macros from this enum): 0 for success,
+    positive for a segment that ends to hand over to the other method of the switching solver,
+    negative for a failure.  The failure codes lie below -999, apart from the flags of
+    SUNDIALS CVODE (-1 to -99), which :meth:`of_code` reads as :attr:`SOLVER_FAILED`.
     """
 
-    SUCCESS = "The integration reached the end of the time span."
-    MAX_STEPS = "reached the maximum number of steps"
-    APPROACH = ("the motion approaches a singular configuration (Phi_q nearly loses rank), where an "
-                "index-1 formulation cannot tell the branches of the motion apart; method='ali3p' or "
-                "'switching' (the default) passes it")
-    SINGULAR = ("singular configuration: M is not positive definite on the null space of [Phi_q; A], the "
-                "accelerations are not determined (e.g. Euler angles at gimbal lock)")
-    STEP_TOO_SMALL = "the step size fell below the smallest step (error test failures)"
-    NEWTON_FAILED = "Newton's method did not converge at the smallest step"
-    PROJECTION_FAILED = "the projection onto the constraints failed"
-    OUTPUTS_FULL = "more steps than output rows: pass t_eval to choose the outputs"
-    SOLVER_FAILED = "the integrator failed"
+    SUCCESS = 0, "The integration reached the end of the time span."
+    MAX_STEPS = -1001, "reached the maximum number of steps"
+    APPROACH = 2, ("the motion approaches a singular configuration (Phi_q nearly loses rank), where an "
+                   "index-1 formulation cannot tell the branches of the motion apart; method='ali3p' or "
+                   "'switching' (the default) passes it")
+    SINGULAR = -1003, ("singular configuration: M is not positive definite on the null space of [Phi_q; A], "
+                       "the accelerations are not determined (e.g. Euler angles at gimbal lock)")
+    STEP_TOO_SMALL = -1004, "the step size fell below the smallest step (error test failures)"
+    NEWTON_FAILED = -1005, "Newton's method did not converge at the smallest step"
+    PROJECTION_FAILED = -1002, "the projection onto the constraints failed"
+    OUTPUTS_FULL = -1006, "more steps than output rows: pass t_eval to choose the outputs"
+    SOLVER_FAILED = -1000, "the integrator failed"
+
+    code: int
+
+    def __new__(cls, code: int, message: str) -> Result:
+        member = object.__new__(cls)
+        member._value_ = message
+        member.code = code
+        return member
 
     @property
     def status(self) -> int:
         """0 for success, -1 otherwise."""
         return 0 if self is Result.SUCCESS else -1
+
+    @classmethod
+    def of_code(cls, code: int) -> Result:
+        """The result a compiled driver's return ``code`` stands for (:attr:`SOLVER_FAILED` for a
+        code that is no member's, such as CVODE's own flags)."""
+        return next((member for member in cls if member.code == code), cls.SOLVER_FAILED)
 
 
 @dataclass(frozen=True)
@@ -136,7 +155,7 @@ class Trajectory(ColumnExport):
     model : NumericModel
         The model that was integrated.
     method : str
-        Integration method that produced the trajectory.
+        ``name`` of the :class:`~kronlag.simulation.Solver` that produced the trajectory.
     message : str
         Solver report.
     nfev, njev, steps : int

@@ -5,6 +5,12 @@ the Kronecker product, the time derivative of a matrix (Theorem 1) and the
 product rule (Theorem 2).  These are the literal formulas of the paper on
 SymPy matrices; :func:`kronlag.derive` uses sparse equivalents of them in its
 hot path and the tests check that both agree.
+
+References
+----------
+.. [1] N. Van Khang, "Kronecker product and a new matrix form of Lagrangian equations with
+   multipliers for constrained multibody systems", Mechanics Research Communications 38 (2011)
+   294-299, https://doi.org/10.1016/j.mechrescom.2011.04.004
 """
 
 from __future__ import annotations

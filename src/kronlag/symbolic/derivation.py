@@ -18,6 +18,11 @@ Theorem 2 gives the second term row by row::
 so that ``C = Md - T2 / 2`` and the Christoffel form is
 ``C_christoffel = (Md + T2^T - T2) / 2``.  All heavy algebra runs in SymEngine
 on plain symbols; the results are converted to SymPy once at the end.
+
+The terms come from the system's items themselves: each body gives its kinetic-energy terms
+``(J, W)`` (:meth:`~kronlag.model.bodies.Body.kinetic_terms`), each load its potential and
+generalized force (:class:`~kronlag.model.loads.Load`), computed with the SymEngine calculus
+that :func:`derive` lends them (:class:`_SymEngineCalculus`).
 """
 
 from __future__ import annotations
@@ -31,7 +36,8 @@ from sympy.core.add import _addsort
 from sympy.core.mul import _mulsort
 
 from ..core.errors import InputError
-from ..model.bodies import PlanarBody, PointMass, RigidBody
+from ..model.bodies import RigidBody
+from ..model.contributions import KineticTerm, Velocity
 from ..model.symbols import t
 from ..model.system import System
 from .equations import Equations
@@ -208,6 +214,51 @@ class _AlongSpeeds:
         return first, se.Add(*(se.diff(first, q) * qd for q, qd in self.speeds.items()))
 
 
+class _SymEngineCalculus:
+    """The :class:`~kronlag.model.contributions.Calculus` that :func:`derive` lends bodies and loads:
+    SymEngine on plain symbols.  Velocities are memoized, so that a body's angular velocity serves
+    both its kinetic energy and the torques on it."""
+
+    def __init__(self, q: list, qd: list):
+        self.q = q
+        self.speeds = se.DenseMatrix(len(qd), 1, qd)
+        self.along = _AlongSpeeds(q, qd)
+        self.matrices: dict = {}
+        self.velocities: dict = {}
+
+    @staticmethod
+    def scalar(expression: sp.Expr) -> se.Basic:
+        return se.sympify(expression)
+
+    def matrix(self, matrix: sp.MatrixBase) -> se.DenseMatrix:
+        """``matrix`` in SymEngine, converted once (a body's position serves its velocity and its weight)."""
+        key = sp.ImmutableMatrix(matrix)
+        if key not in self.matrices:
+            self.matrices[key] = _se_matrix(key)
+        return self.matrices[key]
+
+    def jacobian(self, vector: se.DenseMatrix) -> se.DenseMatrix:
+        return _jacobian(vector, self.q)
+
+    def velocity(self, vector: sp.MatrixBase) -> Velocity:
+        """``J = d vector/dq`` and ``Jd qd = D2 vector`` (see :class:`_AlongSpeeds`)."""
+        key = sp.ImmutableMatrix(vector)
+        if key not in self.velocities:
+            entries = self.matrix(key)
+            bias = se.DenseMatrix(entries.rows, 1, [self.along(entry)[1] for entry in entries])
+            self.velocities[key] = Velocity(self.jacobian(entries), bias)
+        return self.velocities[key]
+
+    def angular_velocity(self, body: RigidBody) -> Velocity:
+        """``J_R`` (:func:`_rotation_jacobian`) and ``Jd qd = D(J_R qd)`` at fixed ``qd``."""
+        if body not in self.velocities:
+            jacobian = _rotation_jacobian(body, self.q)
+            omega = jacobian * self.speeds
+            bias = se.DenseMatrix(3, 1, [self.along(entry)[0] for entry in omega])
+            self.velocities[body] = Velocity(jacobian, bias, gradient=False)
+        return self.velocities[body]
+
+
 def _weigh(weight, matrix: se.DenseMatrix) -> se.DenseMatrix:
     """``W matrix`` for a square matrix weight ``W``; a scalar weight is kept apart (see _Accumulator)."""
     return weight * matrix if isinstance(weight, se.DenseMatrix) else matrix
@@ -230,14 +281,15 @@ class _Accumulator:
         self.second_terms: dict[tuple[int, int], list] = defaultdict(list)
         self.velocity_terms: dict[tuple[int, int], list] = defaultdict(list)
 
-    def add(self, jacobian: se.DenseMatrix, weight, bias: se.DenseMatrix, *, gradient: bool = True) -> None:
-        """Add ``J^T W J``; ``weight`` is a scalar or a symmetric square matrix ``W``.
+    def add(self, term: KineticTerm) -> None:
+        """Add ``J^T W J`` of a body's kinetic-energy term; ``W`` is a scalar or a symmetric square matrix.
 
-        ``bias`` is ``Jd qd`` (a column, the rows of ``J``; from :class:`_AlongSpeeds`).
-        ``gradient``: ``J`` is the Jacobian of a position or an angle (its
-        columns' derivatives are symmetric, ``dJ_i/dq_k = dJ_k/dq_i``); false
-        for the angular-velocity Jacobian of a spatial body.
+        The term's velocity gives ``J``, ``Jd qd`` (a column, the rows of ``J``; from
+        :class:`_AlongSpeeds`) and whether ``J`` is the Jacobian of a position or an angle (its
+        columns' derivatives are symmetric, ``dJ_i/dq_k = dJ_k/dq_i``); it is not for the
+        angular-velocity Jacobian of a spatial body.
         """
+        jacobian, weight, bias = term.velocity.jacobian, term.weight, term.velocity.bias
         rows = range(jacobian.rows)
         support = [k for k in range(jacobian.cols) if any(not jacobian[r, k].is_zero for r in rows)]
         if not support:
@@ -263,7 +315,7 @@ class _Accumulator:
         # gyroscopic term J^T (omega x W omega), far smaller written so.  Summed body by body these
         # stay small where the entries of C, summed over l, would not.
         _scatter(self.velocity_terms, factor, support, [0], weighted.T * bias)
-        if not gradient:
+        if not term.velocity.gradient:
             omega, spin = jacobian * qd, weighted * qd
             gyroscopic = se.DenseMatrix(3, 1, [omega[1] * spin[2] - omega[2] * spin[1],
                                                omega[2] * spin[0] - omega[0] * spin[2],
@@ -343,67 +395,36 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
         ``Phi`` (r x 1), ``Phi_q`` (r x m), ``A`` (s x m), ``b`` (s x 1),
         ``f_Q`` (m x 1); on first access ``C_christoffel`` (m x m), ``dM_dq``
         (m x m²), ``Md``, ``gamma`` and ``gamma_nh``.
+
+
+    References
+    ----------
+    .. [1] N. Van Khang, "Kronecker product and a new matrix form of Lagrangian equations with
+       multipliers for constrained multibody systems", Mechanics Research Communications 38 (2011)
+       294-299, https://doi.org/10.1016/j.mechrescom.2011.04.004
     """
     if not isinstance(system, System):
         raise TypeError(f"derive takes a kronlag.System, got {type(system).__name__}")
     q = [se.Symbol(s.name) for s in system.coordinates]
     qd = [se.Symbol(s.name) for s in system.speeds]
     m = len(q)
+    calculus = _SymEngineCalculus(q, qd)
     accumulator = _Accumulator(q, qd)
     potential = se.Integer(0)
     gravity = _se_matrix(system.gravity) if system.gravity is not None else None
-    generalized_force = se.zeros(m, 1)
-    rotation_jacobians = {}
-
-    along = _AlongSpeeds(q, qd)
-
-    def acceleration_bias(vector: se.DenseMatrix) -> se.DenseMatrix:  # Jd qd for J = d vector/dq
-        return se.DenseMatrix(vector.rows, 1, [along(entry)[1] for entry in vector])
-
     for body in system.bodies:
-        position = _se_matrix(body.position)
-        mass = se.sympify(body.mass)
-        accumulator.add(_jacobian(position, q), mass, acceleration_bias(position))
-        if isinstance(body, PlanarBody):
-            angle = se.DenseMatrix(1, 1, [se.sympify(body.angle)])
-            angle_jacobian = _jacobian(angle, q)
-            accumulator.add(angle_jacobian, se.sympify(body.inertia), acceleration_bias(angle))
-            rotation_jacobians[body.name] = angle_jacobian
-        elif isinstance(body, RigidBody):
-            rotation_jacobian = _rotation_jacobian(body, q)
-            omega = rotation_jacobian * se.DenseMatrix(m, 1, qd)  # Jd qd = D(J qd) at fixed qd
-            accumulator.add(rotation_jacobian, _se_matrix(body.inertia),
-                            se.DenseMatrix(3, 1, [along(entry)[0] for entry in omega]), gradient=False)
-            rotation_jacobians[body.name] = rotation_jacobian
-        else:
-            assert isinstance(body, PointMass)
+        for term in body.kinetic_terms(calculus):
+            accumulator.add(term)
         if gravity is not None:
-            potential -= mass * (gravity.T * position)[0, 0]
+            potential -= calculus.scalar(body.mass) * (gravity.T * calculus.matrix(body.position))[0, 0]
 
-    for spring in system.springs:
-        potential += se.sympify(spring.potential())
-    for term in system.potentials:
-        potential += se.sympify(term.expression)
+    generalized_force = se.zeros(m, 1)
+    for load in system.loads:
+        potential += calculus.scalar(load.potential())
+        force = load.generalized_force(calculus)
+        if force is not None:
+            generalized_force += force
     g = se.DenseMatrix(m, 1, [se.diff(potential, qk) for qk in q])
-
-    qd_vector = se.DenseMatrix(m, 1, qd)
-    for damper in system.dampers:
-        separation = _se_matrix(damper.point_a - damper.point_b)
-        gradient = separation.T * _jacobian(separation, q)  # d^T dd/dq = L dL/dq
-        rate = (gradient * qd_vector)[0, 0]
-        squared = (separation.T * separation)[0, 0]
-        generalized_force -= gradient.T * (se.sympify(damper.coefficient) * rate / squared)
-    for force in system.forces:
-        value = _se_matrix(force.value)
-        if force.kind == "generalized":
-            generalized_force += value
-        elif force.kind == "point":
-            generalized_force += _jacobian(_se_matrix(force.where), q).T * value
-        else:
-            body = system.body(force.where)
-            if isinstance(body, RigidBody) and force.frame == "world":
-                value = _se_matrix(body.rotation).T * value
-            generalized_force += rotation_jacobians[body.name].T * value
 
     constraints = se.DenseMatrix(len(system.constraints), 1,
                                  [se.sympify(c.expression) for c in system.constraints])

@@ -61,6 +61,13 @@ class Equations:
         Generalized non-conservative forces (may depend on q, qd and ``t``).
     potential_energy : expression
         ``Pi(q)``.
+
+
+    References
+    ----------
+    .. [1] N. Van Khang, "Kronecker product and a new matrix form of Lagrangian equations with
+       multipliers for constrained multibody systems", Mechanics Research Communications 38 (2011)
+       294-299, https://doi.org/10.1016/j.mechrescom.2011.04.004
     """
 
     system: System

@@ -15,17 +15,15 @@ from typing import Any
 import sympy as sp
 
 from ...core.errors import ExpressionError, ModelError, ModelFileError
-from ..bodies import PlanarBody, PointMass, RigidBody
+from ..bodies import BODY_TYPES, Body
 from ..expressions import RESERVED_NAMES, parse_expression
-from ..rotations import MAX_ROTATION_FACTORS, RotationSequence
 from ..symbols import speed_symbol, t
 from ..system import System, drive_name
+from .formats import FIELD_KINDS, LOAD_FORMATS, read_rotation
 from .model_file import ModelFile, PrescribedMotion, SimulationSettings
 from .units import si_unit
 
 __all__ = ["loads_model", "load_model"]
-
-_BODY_TYPES = ("planar", "rigid", "point")
 
 
 class _Reader:
@@ -111,6 +109,16 @@ class _Reader:
                 raise self.error(f"{entry}[{i}]", f"unknown coordinate {name!r}; coordinates are {', '.join(known)}")
         return names
 
+    def flag(self, value, entry: str) -> bool:
+        """A TOML boolean."""
+        if not isinstance(value, bool):
+            raise self.error(entry, f"expected true or false, got {_kind(value)}")
+        return value
+
+    def optional_name(self, table: dict, entry: str) -> str | None:
+        """The entry's ``name``, ``None`` where it has none."""
+        return self.string(table["name"], f"{entry}.name") if "name" in table else None
+
     def number(self, value, entry: str, *, positive: bool = False) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise self.error(entry, f"expected a finite number, got {_kind(value)}")
@@ -178,8 +186,8 @@ def _read(document: dict, source: str) -> ModelFile:
     reader = _Reader(source)
     reader.table(document, "", required=("coordinates",), optional=(
         "name", "description", "gravity", "parameters", "points", "bodies", "constraints",
-        "nonholonomic_constraints", "springs", "dampers", "potentials", "forces", "torques",
-        "generalized_forces", "initial", "simulation", "drives", "drawing", "traces", "joints"))
+        "nonholonomic_constraints", *LOAD_FORMATS, "initial", "simulation", "drives", "drawing", "traces",
+        "joints"))
     name = reader.string(document.get("name", Path(source).stem), "name")
     description = reader.string(document.get("description", ""), "description")
     coordinate_list = document["coordinates"]
@@ -248,117 +256,54 @@ def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
     return values, units
 
 
-def _body(reader: _Reader, entry: str, table: dict) -> PlanarBody | RigidBody | PointMass:
+def _body(reader: _Reader, entry: str, table: dict) -> Body:
+    """A body of the type ``type`` names (:data:`~kronlag.model.bodies.BODY_TYPES`), its fields read by kind."""
     kind = reader.string(table.get("type", ""), f"{entry}.type")
-    if kind not in _BODY_TYPES:
-        raise reader.error(f"{entry}.type", f"expected one of {', '.join(_BODY_TYPES)}, got {kind!r}")
-    fields = {"planar": ("inertia", "angle"), "rigid": ("inertia", "rotation"), "point": ()}[kind]
-    reader.table(table, entry, required=("name", "type", "mass", "position", *fields),
-                 optional=("points", "simplify") if kind == "rigid" else ("points",))
+    if kind not in BODY_TYPES:
+        raise reader.error(f"{entry}.type", f"expected one of {', '.join(BODY_TYPES)}, got {kind!r}")
+    body_type = BODY_TYPES[kind]
+    reader.table(table, entry, required=("name", "type", *(field.name for field in body_type.fields if field.required)),
+                 optional=("points", *(field.name for field in body_type.fields if not field.required)))
     name = reader.string(table["name"], f"{entry}.name")
-    mass = reader.expression(table["mass"], f"{entry}.mass")
+    arguments = {field.name: FIELD_KINDS[field.kind].read(reader, table[field.name], f"{entry}.{field.name}", body_type)
+                 for field in body_type.fields if field.name in table}
     with reader.entry(entry):
-        if kind == "planar":
-            return PlanarBody(name, mass=mass, inertia=reader.expression(table["inertia"], f"{entry}.inertia"),
-                              position=reader.point(table["position"], f"{entry}.position", (2,)),
-                              angle=reader.expression(table["angle"], f"{entry}.angle"))
-        if kind == "point":
-            return PointMass(name, mass=mass, position=reader.point(table["position"], f"{entry}.position"))
-        simplify = table.get("simplify", True)
-        if not isinstance(simplify, bool):
-            raise reader.error(f"{entry}.simplify", f"expected true or false, got {_kind(simplify)}")
-        return RigidBody(name, mass=mass, inertia=_inertia_tensor(reader, table["inertia"], f"{entry}.inertia"),
-                         position=reader.point(table["position"], f"{entry}.position", (3,)),
-                         rotation=_rotation(reader, table["rotation"], f"{entry}.rotation"), simplify=simplify)
-
-
-def _inertia_tensor(reader: _Reader, value, entry: str) -> sp.Matrix:
-    """A 3x3 tensor, or 3 principal moments on the diagonal."""
-    if isinstance(value, list) and len(value) == 3 and not any(isinstance(row, list) for row in value):
-        return sp.diag(*reader.vector(value, entry, (3,)))
-    return sp.Matrix(reader.matrix(value, entry, 3, 3))
-
-
-def _rotation(reader: _Reader, value, entry: str) -> sp.Matrix | RotationSequence:
-    """A 3x3 matrix, or ``{axes = "zxz", angles = [...]}``: ``R = R_a1(angle1) R_a2(angle2) ...``
-    (a :class:`~kronlag.system.RotationSequence`, at most ``MAX_ROTATION_FACTORS`` axes)."""
-    if not isinstance(value, dict):
-        return sp.Matrix(reader.matrix(value, entry, 3, 3))
-    reader.table(value, entry, required=("axes", "angles"))
-    axes = reader.string(value["axes"], f"{entry}.axes")
-    if not axes or any(axis not in "xyz" for axis in axes):
-        raise reader.error(f"{entry}.axes", f"expected a sequence of the letters x, y, z, got {axes!r}")
-    if len(axes) > MAX_ROTATION_FACTORS:
-        raise reader.error(f"{entry}.axes", f"{len(axes)} elementary rotations; at most {MAX_ROTATION_FACTORS} "
-                                            "are allowed")
-    angles = reader.vector(value["angles"], f"{entry}.angles", (len(axes),))
-    with reader.entry(entry):
-        return RotationSequence(list(zip(axes, angles)))
+        return body_type(name, **arguments)
 
 
 def _read_items(reader: _Reader, system: System, document: dict) -> None:
     """Bodies, constraints, force elements and drawing, in file order within each kind."""
-    for entry, table in reader.tables(document, "bodies", required=("name", "type", "mass", "position"),
-                                      optional=("inertia", "angle", "rotation", "simplify", "points")):
+    fields = dict.fromkeys(field.name for body_type in BODY_TYPES.values() for field in body_type.fields)
+    for entry, table in reader.tables(document, "bodies", required=("name", "type"), optional=(*fields, "points")):
         body = _body(reader, entry, table)
         with reader.entry(entry):
             system.add_body(body)
         _read_body_points(reader, system, table.get("points", {}), body.name, f"{entry}.points")
     _read_joints(reader, system, document)
-    scalar_items: list[tuple[str, Callable]] = [
+    constraints: list[tuple[str, Callable]] = [
         ("constraints", system.add_constraint),
         ("nonholonomic_constraints", system.add_nonholonomic_constraint),
-        ("potentials", system.add_potential),
     ]
-    for key, add in scalar_items:
+    for key, add in constraints:
         for entry, table in reader.tables(document, key, required=("expression",), optional=("name",)):
             expression = reader.expression(table["expression"], f"{entry}.expression")
             with reader.entry(entry):
-                add(expression, name=_optional_name(reader, table, entry))
-    for entry, table in reader.tables(document, "springs", required=("point_a", "point_b", "stiffness"),
-                                      optional=("name", "free_length")):
-        with reader.entry(entry):
-            system.add_spring(reader.point(table["point_a"], f"{entry}.point_a"),
-                              reader.point(table["point_b"], f"{entry}.point_b"),
-                              stiffness=reader.expression(table["stiffness"], f"{entry}.stiffness"),
-                              free_length=reader.expression(table.get("free_length", 0), f"{entry}.free_length"),
-                              name=_optional_name(reader, table, entry))
-    for entry, table in reader.tables(document, "dampers", required=("point_a", "point_b", "coefficient"),
-                                      optional=("name",)):
-        with reader.entry(entry):
-            system.add_damper(reader.point(table["point_a"], f"{entry}.point_a"),
-                              reader.point(table["point_b"], f"{entry}.point_b"),
-                              coefficient=reader.expression(table["coefficient"], f"{entry}.coefficient"),
-                              name=_optional_name(reader, table, entry))
-    for entry, table in reader.tables(document, "forces", required=("point", "force"), optional=("name",)):
-        point = reader.point(table["point"], f"{entry}.point")
-        with reader.entry(entry):
-            system.add_force(point, reader.vector(table["force"], f"{entry}.force", (len(point),)),
-                             name=_optional_name(reader, table, entry))
-    for entry, table in reader.tables(document, "torques", required=("body", "torque"), optional=("name", "frame")):
-        value = table["torque"]
-        torque = (reader.vector(value, f"{entry}.torque", (3,)) if isinstance(value, list)
-                  else reader.expression(value, f"{entry}.torque"))
-        with reader.entry(entry):
-            system.add_torque(reader.string(table["body"], f"{entry}.body"), torque,
-                              frame=reader.string(table.get("frame", "world"), f"{entry}.frame"),
-                              name=_optional_name(reader, table, entry))
-    m = len(system.coordinates)
-    for entry, table in reader.tables(document, "generalized_forces", required=("force",), optional=("name",)):
-        force = reader.vector(table["force"], f"{entry}.force", (m,))
-        with reader.entry(entry):
-            system.add_generalized_force(force, name=_optional_name(reader, table, entry))
+                add(expression, name=reader.optional_name(table, entry))
+    for key, form in LOAD_FORMATS.items():
+        for entry, table in reader.tables(document, key, required=form.required, optional=("name", *form.optional)):
+            with reader.entry(entry):
+                form.read(reader, system, entry, table, reader.optional_name(table, entry))
     for entry, table in reader.tables(document, "drawing", required=("points",), optional=("name",)):
         points = table["points"]
         if not isinstance(points, list):
             raise reader.error(f"{entry}.points", f"expected a list of points, got {_kind(points)}")
         vertices = [reader.point(point, f"{entry}.points[{i}]") for i, point in enumerate(points)]
         with reader.entry(entry):
-            system.add_drawing_line(vertices, name=_optional_name(reader, table, entry))
+            system.add_drawing_line(vertices, name=reader.optional_name(table, entry))
     for entry, table in reader.tables(document, "traces", required=("point",), optional=("name",)):
         point = reader.point(table["point"], f"{entry}.point")
         with reader.entry(entry):
-            system.add_trace(point, name=_optional_name(reader, table, entry))
+            system.add_trace(point, name=reader.optional_name(table, entry))
 
 
 def _read_body_points(reader: _Reader, system: System, table, body: str, entry: str) -> None:
@@ -390,16 +335,12 @@ def _read_joints(reader: _Reader, system: System, document: dict) -> None:
         if "angle" in table:
             options["angle"] = reader.expression(table["angle"], f"{entry}.angle")
         if "rotation" in table:
-            options["rotation"] = _rotation(reader, table["rotation"], f"{entry}.rotation")
+            options["rotation"] = read_rotation(reader, table["rotation"], f"{entry}.rotation")
         with reader.entry(entry):
             system.add_joint(reader.string(table["type"], f"{entry}.type"),
                              reader.string(table["body_a"], f"{entry}.body_a"),
                              reader.string(table["body_b"], f"{entry}.body_b"),
-                             name=_optional_name(reader, table, entry), **options)
-
-
-def _optional_name(reader: _Reader, table: dict, entry: str) -> str | None:
-    return reader.string(table["name"], f"{entry}.name") if "name" in table else None
+                             name=reader.optional_name(table, entry), **options)
 
 
 def _read_settings(reader: _Reader, document: dict, model: ModelFile) -> None:

@@ -12,10 +12,11 @@ import sympy as sp
 from sympy.printing.str import StrPrinter
 
 from ...core.errors import ExpressionError, ModelError
-from ..bodies import PlanarBody, PointMass, RigidBody
+from ..bodies import BODY_TYPES, Body
 from ..expressions import parse_expression
 from ..symbols import t
 from ..system import System
+from .formats import FIELD_KINDS, LOAD_FORMATS
 from .model_file import ModelFile
 
 __all__ = ["to_toml", "dump_model"]
@@ -96,29 +97,14 @@ def _document(model: ModelFile) -> dict[str, Any]:
                               for key, value in joint.geometry}} for joint in system.joints]
     joint_rows = {row for joint in system.joints for row in joint.constraint_names}
     for key, items in (("constraints", [c for c in system.constraints if c.name not in joint_rows]),
-                       ("nonholonomic_constraints", system.nonholonomic_constraints),
-                       ("potentials", system.potentials)):
+                       ("nonholonomic_constraints", system.nonholonomic_constraints)):
         document[key] = [{"name": item.name, "expression": writer.expression(item.expression)} for item in items]
-    document["springs"] = [{"name": s.name, "point_a": writer.vector(s.point_a), "point_b": writer.vector(s.point_b),
-                            "stiffness": writer.expression(s.stiffness),
-                            "free_length": writer.expression(s.free_length)} for s in system.springs]
-    document["dampers"] = [{"name": d.name, "point_a": writer.vector(d.point_a), "point_b": writer.vector(d.point_b),
-                            "coefficient": writer.expression(d.coefficient)} for d in system.dampers]
-    kinds = {"point": "forces", "body torque": "torques", "generalized": "generalized_forces"}
-    for key in kinds.values():
-        document[key] = []
-    for force in system.forces:
-        entry: dict[str, Any] = {"name": force.name}
-        if force.kind == "point":
-            entry.update(point=writer.vector(force.where), force=writer.vector(force.value))
-        elif force.kind == "generalized":
-            entry["force"] = writer.vector(force.value)
-        else:
-            torque = writer.vector(force.value)
-            entry.update(body=force.where, torque=torque[0] if len(torque) == 1 else torque)
-            if force.frame != "world":
-                entry["frame"] = force.frame
-        document[kinds[force.kind]].append(entry)
+    document.update({key: [] for key in LOAD_FORMATS})
+    for load in system.loads:
+        if load.file_table not in LOAD_FORMATS:
+            raise ModelError(f"cannot write the load {load.name!r} ({type(load).__name__}): model files have no "
+                             "table for it")
+        document[load.file_table].append({"name": load.name, **LOAD_FORMATS[load.file_table].write(writer, load)})
     document["initial"] = {"q": {k: writer.expression(v) for k, v in model.q_guess.items()},
                            "fixed": list(model.fixed),
                            "qd": {k: writer.expression(v) for k, v in model.qd_guess.items()},
@@ -137,29 +123,13 @@ def _document(model: ModelFile) -> dict[str, Any]:
     return document
 
 
-def _body_document(writer: _Writer, body: PlanarBody | RigidBody | PointMass) -> dict[str, Any]:
-    kind = {PlanarBody: "planar", RigidBody: "rigid", PointMass: "point"}[type(body)]
-    entry: dict[str, Any] = {"name": body.name, "type": kind, "mass": writer.expression(body.mass)}
-    if isinstance(body, PlanarBody):
-        entry["inertia"] = writer.expression(body.inertia)
-    elif isinstance(body, RigidBody):
-        entry["inertia"] = writer.matrix(body.inertia)
-    entry["position"] = writer.vector(body.position)
-    if isinstance(body, PlanarBody):
-        entry["angle"] = writer.expression(body.angle)
-    elif isinstance(body, RigidBody):
-        entry.update(rotation=_rotation_document(writer, body), simplify=body.simplify)
-    return entry
-
-
-def _rotation_document(writer: _Writer, body: RigidBody) -> list | dict[str, Any]:
-    """``{axes, angles}`` for a sequence of rotations about x, y, z; else the matrix."""
-    sequence = body.rotation_sequence
-    names = {(1, 0, 0): "x", (0, 1, 0): "y", (0, 0, 1): "z"}
-    if sequence is not None and all(tuple(axis) in names for axis, _ in sequence.factors):
-        return {"axes": "".join(names[tuple(axis)] for axis, _ in sequence.factors),
-                "angles": [writer.expression(angle) for _, angle in sequence.factors]}
-    return writer.matrix(body.rotation)
+def _body_document(writer: _Writer, body: Body) -> dict[str, Any]:
+    if BODY_TYPES.get(body.file_type) is not type(body):
+        raise ModelError(f"cannot write the body {body.name!r} ({type(body).__name__}): model files have no type "
+                         "for it (a body type is written under its own file_type)")
+    arguments = body.arguments()
+    return {"name": body.name, "type": body.file_type,
+            **{field.name: FIELD_KINDS[field.kind].write(writer, arguments[field.name]) for field in body.fields}}
 
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")

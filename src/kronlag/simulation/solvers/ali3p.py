@@ -2,23 +2,12 @@
 
 from __future__ import annotations
 
-import ctypes
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ...core.errors import SingularConfigurationError
-from ..drivers import (
-    _MAX_EVENTS,
-    _PROGRESS,
-    Segment,
-    driver,
-    output_rows,
-    passage,
-    require,
-    segment_status,
-    solution_of,
-)
+from ..drivers import Segment, require, run, segment_status, solution_of
 from ..problem import MultibodyProblem, Solution, Solver, SolverOptions
 from .compiled import CompiledSolver
 
@@ -37,7 +26,7 @@ class Index3Solver(Solver):
     generated symbolically: the ``"tangent"`` kernel of :mod:`kronlag.codegen`),
     the augmented Lagrangian update ``lambda* <- lambda* + alpha Phi`` and
     projections of the velocities and accelerations in the metric of ``J`` (see
-    ``src/kronlag/c/index3.c``).  No rank decision enters a step: ``J`` stays
+    ``src/kronlag/simulation/c/index3.c``).  No rank decision enters a step: ``J`` stays
     positive definite where ``Phi_q`` loses rank, so the method passes singular
     configurations on the branch it is on (IFToMM A02) and integrates
     mechanisms with redundant constraints (IFToMM A04).  It does not detect a
@@ -50,7 +39,8 @@ class Index3Solver(Solver):
 
     name = "ali3p"
     formulation = "index-3 augmented Lagrangian, mass-orthogonal projections (ALI3-P), compiled"
-    order = "2 (trapezoidal rule), local error control"
+    integrator = "trapezoidal rule with local error control, compiled"
+    order = 2
     requirements = "the C backend, constant parameters, no nonholonomic constraints and a C compiler"
     #: The driver's relative tolerance is the requested one divided by this (``atol`` is kept),
     #: so that the global error at a given ``rtol`` is of the size the other methods give: the
@@ -72,9 +62,9 @@ class Index3Solver(Solver):
 def index3_segment(problem: MultibodyProblem, options: SolverOptions, t0: float, y0: np.ndarray,
                     handback: bool) -> Segment:
     """ALI3-P from the consistent state ``(t0, y0)`` until ``t1`` or, with ``handback``, until the
-    motion has left the neighbourhood of a singular configuration (``flag`` 1)."""
+    motion has left the neighbourhood of a singular configuration (``flag``
+    :data:`~kronlag.simulation.interface.HANDBACK`)."""
     model, m, r = problem.model, problem.m, problem.model.r
-    library = driver(model, "index3")
     q0, qd0 = y0[:m], y0[m:]
     try:
         start = model.forward_dynamics(q0, qd0, t0)
@@ -84,28 +74,5 @@ def index3_segment(problem: MultibodyProblem, options: SolverOptions, t0: float,
         start = None
     a0 = np.zeros(m) if start is None else start.qdd
     lam0 = np.zeros(r) if start is None else start.lam
-    times, rows = output_rows(problem, t0, options)
-    t_out, y_out = np.empty(rows), np.empty((rows, 2 * m))
-    qdd, lam = np.empty((rows, m)), np.empty((rows, r))
-    energies, phi, velocity = np.empty((rows, 2)), np.empty((rows, r)), np.empty((rows, r))
-    events, y_end = np.empty((_MAX_EVENTS, 5 + m)), np.empty(2 * m)
-    written, event_count, t_end = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(t0)
-    stats = np.zeros(4, dtype=np.int64)
-    callback = _PROGRESS(options.progress) if options.progress is not None else _PROGRESS()
-    p = model.parameter_vector(t0)
-    y0, a0, lam0 = (np.ascontiguousarray(x, dtype=float) for x in (y0, a0, lam0))
-    flag = library.kronlag_index3(
-        p.ctypes.data, len(p), t0, problem.t1, y0.ctypes.data, a0.ctypes.data, lam0.ctypes.data, len(times),
-        times.ctypes.data, options.rtol / Index3Solver.TOLERANCE_SCALE, options.atol,
-        0.0, options.max_step if np.isfinite(options.max_step) else 0.0,
-        options.max_steps, rows, int(handback), t_out.ctypes.data, y_out.ctypes.data, qdd.ctypes.data,
-        lam.ctypes.data, energies.ctypes.data, phi.ctypes.data, velocity.ctypes.data, ctypes.byref(written),
-        stats.ctypes.data, events.ctypes.data, _MAX_EVENTS, ctypes.byref(event_count), ctypes.byref(t_end),
-        y_end.ctypes.data, callback)
-    n = written.value
-    derived = {"qdd": qdd[:n].copy(), "lam": lam[:n].copy(), "mu": np.empty((n, 0)),
-               "kinetic_energy": energies[:n, 0].copy(), "potential_energy": energies[:n, 1].copy(),
-               "position_residual": phi[:n].copy(), "velocity_residual": velocity[:n].copy()}
-    passages = tuple(passage(model, record) for record in events[:min(event_count.value, _MAX_EVENTS)])
-    return Segment(t=t_out[:n].copy(), y=y_out[:n].copy(), derived=derived, events=passages, flag=flag,
-                    t_end=t_end.value, y_end=y_end, steps=int(stats[0]), nfev=int(stats[2]), njev=int(stats[3]))
+    return run("index3", problem, options, t0, y0, a0=a0, lam0=lam0, handback=int(handback),
+               rtol=options.rtol / Index3Solver.TOLERANCE_SCALE)

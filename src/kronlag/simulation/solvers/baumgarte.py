@@ -27,7 +27,8 @@ class BaumgarteSolver(Solver):
     name = "baumgarte"
     formulation = "index-1 ODE, Baumgarte stabilization"
     stabilization = 10.0
-    order = "8 (Dormand-Prince 8(5,3), scipy DOP853)"
+    integrator = "Dormand-Prince 8(5,3), scipy DOP853"
+    order = 8
 
     def solve(self, problem: MultibodyProblem) -> Solution:
         return march(lambda: DOP853Stepper(problem, self.options, project=False), problem, self.options)

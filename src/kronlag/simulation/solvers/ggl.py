@@ -44,7 +44,8 @@ class _IDAStepper(Stepper):
         atol[algebraic] = _ALGEBRAIC_ATOL
         self.solver = IDA(self._residual, rtol=options.rtol, atol=atol, algebraic_idx=algebraic,
                           max_step=options.max_step if np.isfinite(options.max_step) else 0.0,
-                          max_num_steps=options.max_steps + 1)
+                          max_num_steps=options.max_steps + 1,
+                          **({} if options.max_order is None else {"max_order": options.max_order}))
         self.solver.init_step(problem.t0, y0, yp0)
         self.t, self.y = problem.t0, problem.y0
         self.nfev = self.njev = 0
@@ -108,7 +109,9 @@ class GGLSolver(Solver):
 
     name = "ggl"
     formulation = "stabilized index-2 DAE (Gear-Gupta-Leimkuhler)"
-    order = "1-5 (variable-order BDF, SUNDIALS IDA)"
+    integrator = "variable-order BDF, SUNDIALS IDA (scikit-sundae)"
+    order = 5
+    min_order = 1
 
     def solve(self, problem: MultibodyProblem) -> Solution:
         return march(lambda: _IDAStepper(problem, self.options), problem, self.options)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from ..dop853 import DOP853Stepper
 from ..problem import MultibodyProblem, Solution, Solver
 from ..stepping import march
+from .baumgarte import BaumgarteSolver
 
 __all__ = ["ProjectionSolver"]
 
@@ -23,7 +24,8 @@ class ProjectionSolver(Solver):
 
     name = "projection"
     formulation = "index-1 ODE, coordinate projection (positions and velocities) after each step"
-    order = "8 (Dormand-Prince 8(5,3), scipy DOP853)"
+    integrator = BaumgarteSolver.integrator
+    order = BaumgarteSolver.order
 
     def solve(self, problem: MultibodyProblem) -> Solution:
         return march(lambda: DOP853Stepper(problem, self.options, project=True), problem, self.options)

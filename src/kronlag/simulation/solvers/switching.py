@@ -30,7 +30,10 @@ class SwitchingSolver(Solver):
 
     name = "switching"
     formulation = "CVODE on the Baumgarte ODE; ALI3-P near singular configurations (both compiled)"
-    order = "1-12 (Adams-Moulton) away from singular configurations, 2 (trapezoidal) near them"
+    integrator = (f"{CompiledSolver.integrator} away from singular configurations, {Index3Solver.integrator} "
+                  "near them")
+    #: CVODE's orders, which include ALI3-P's 2; ``SolverOptions.max_order`` caps CVODE's.
+    order, min_order = CompiledSolver.order, CompiledSolver.min_order
     requirements = Index3Solver.requirements
     supports = staticmethod(Index3Solver.supports)
     stabilization = CompiledSolver.stabilization
@@ -50,6 +53,6 @@ class SwitchingSolver(Solver):
             else:
                 segment = cvode_segment(problem, budget, t, y)
             segments.append(segment.without_first_row() if segments and problem.t_eval is None else segment)
-            if segment.flag <= 0:
+            if not segment.hands_over:
                 return solution_of(segments, *segment_status(segment, model, "index3" if index3 else "cvode"))
             t, y, index3 = segment.t_end, segment.y_end, not index3
