@@ -85,7 +85,7 @@ def project_positions(model: NumericModel, q, t: float, *, tol: float, free: Seq
     PositionProjection
     """
     q = np.array(q, dtype=float)
-    free = list(range(model.m)) if free is None else list(free)
+    free = slice(None) if free is None else list(free)  # a view for all coordinates: no copies per step
     zero = np.zeros(model.m)
     terms = model.dynamics_terms(q, zero, t)
     residual, stalled, iterations = _residual(terms["Phi"]), False, 0
@@ -118,7 +118,7 @@ def project_velocities(model: NumericModel, q, qd, t: float, *, free: Sequence[i
     qd = np.array(qd, dtype=float)
     if not model.r + model.s:
         return qd
-    free = list(range(model.m)) if free is None else list(free)
+    free = slice(None) if free is None else list(free)  # a view for all coordinates: no copies per step
     if terms is None:
         terms = model.dynamics_terms(np.asarray(q, dtype=float), np.zeros(model.m), t)
     B, c = velocity_constraints(terms)

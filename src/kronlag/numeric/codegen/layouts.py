@@ -3,6 +3,7 @@ which Python (:func:`layout`, :func:`split_terms`) and C (:func:`layout_macros`)
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 
@@ -29,6 +30,7 @@ LAYOUTS: dict[str, tuple[str, ...]] = {
 }
 
 
+@functools.cache
 def layout(kernel: str, m: int, r: int, s: int) -> tuple[tuple[str, int, tuple[int, ...]], ...]:
     """``(block, offset, shape)`` of every block of ``kernel`` (see :data:`LAYOUTS`); vectors have
     shape ``(n,)``, matrices ``(rows, columns)``."""
@@ -56,7 +58,8 @@ def split_terms(shape: tuple[int, int, int], flat: np.ndarray) -> dict[str, np.n
     ``shape`` is ``(m, r, s)``; ``flat`` is (size,) for one state or (N, size) for N states (the
     blocks then have a leading N).
     """
-    return {name: flat[..., offset:offset + int(np.prod(block))].reshape(flat.shape[:-1] + block)
+    lead = flat.shape[:-1]
+    return {name: flat[..., offset:offset + math.prod(block)].reshape(lead + block)
             for name, offset, block in layout("dynamics", *shape)}
 
 
