@@ -23,7 +23,7 @@ from ..model.expressions import parse_expression
 from ..model.modelfile import ModelFile, PrescribedMotion
 from ..model.symbols import t
 from ..model.system import drive_name
-from ..numeric.tolerances import RANK_RTOL, numerical_rank
+from ..numeric.tolerances import matrix_rank
 from ..simulation.simulate import simulate
 from ..studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
 from ..symbolic.derivation import derive
@@ -119,15 +119,10 @@ def check_model(model: ModelFile, *, equations: Equations | None = None) -> Mode
                                       [("t", eom.time), ("q", eom.coordinates), ("qd", eom.speeds),
                                        ("p", eom.parameters)], name="check")
         at_guess = evaluate(0.0, q, qd, [values[p.name] for p in eom.parameters])
-        rank_phi, rank_a = (_rank(at_guess[name]) for name in ("Phi_q", "A"))
+        rank_phi, rank_a = (matrix_rank(at_guess[name]) for name in ("Phi_q", "A"))  # no model yet: default rtol
         residual = float(np.max(np.abs(at_guess["Phi"]), initial=0.0))
     return ModelCheck(name=system.name, m=m, r=r, s=s, degrees_of_freedom=m - r - s, missing_values=missing,
                       rank_Phi_q=rank_phi, rank_A=rank_a, constraint_residual=residual)
-
-
-def _rank(matrix: np.ndarray) -> int:
-    """Numerical rank by the rank policy, with the default tolerance (no numeric model exists yet)."""
-    return numerical_rank(np.linalg.svd(matrix, compute_uv=False), RANK_RTOL) if matrix.size else 0
 
 
 # -- numeric set-up -------------------------------------------------------------------

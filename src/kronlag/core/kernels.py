@@ -43,6 +43,7 @@ __all__ = [
     "ARRAY_NAMESPACE",
     "ExpressionFunction",
     "expression_kernel",
+    "input_renames",
     "PLACEHOLDER",
 ]
 
@@ -80,6 +81,15 @@ class Kernel:
     def size(self) -> int:
         return sum(block.size for block in self.blocks)
 
+    def split(self, flat: np.ndarray) -> dict[str, np.ndarray]:
+        """The blocks of a flat output (``(size,)`` or ``(N, size)``) by name, each of its shape
+        (with the leading N)."""
+        values, start = {}, 0
+        for block in self.blocks:
+            values[block.name] = flat[..., start:start + block.size].reshape(flat.shape[:-1] + block.shape)
+            start += block.size
+        return values
+
 
 #: Integers and the numerators and denominators of fractions up to this size are exact doubles:
 #: they stay exact in SymEngine and print as C/Python numbers that the compiler reads exactly.
@@ -93,7 +103,6 @@ def literal(value: float) -> str:
     """``value`` as a floating-point literal read back exactly (shortest round trip), parenthesized if negative."""
     text = repr(float(value))
     return f"({text})" if value < 0 else text
-
 
 
 class ExpressionConverter:
@@ -175,7 +184,6 @@ class ExpressionConverter:
             raise ModelError(f"{where} = {expr}: {error}") from None
 
 
-
 def _maximum(*values):
     return functools.reduce(np.maximum, values)
 
@@ -211,7 +219,6 @@ def python_source(kernel: Kernel, arguments: Sequence[str] = ("t", "q", "qd", "p
     return "\n".join(lines) + "\n"
 
 
-
 def cse_kernel(name: str, blocks: Sequence[Block], matrices: Sequence[list[list[se.Basic]]],
                constants: Mapping[str, float]) -> Kernel:
     """The :class:`Kernel` ``name`` of the converted ``matrices`` (one per block), with common
@@ -240,19 +247,25 @@ def python_functions(source: str, names: Sequence[str], namespace: Mapping[str, 
     return {name: scope[f"kernel_{name}"] for name in names}
 
 
+def input_renames(inputs: Sequence[tuple[str, object]]) -> dict[sp.Symbol, se.Symbol]:
+    """The names the symbols of ``inputs`` take in generated code: a scalar argument's symbol its
+    argument's name (``t``), the symbols of a vector argument ``argument[i]`` (``q[0]``, ``q[1]``, ...)."""
+    renames: dict[sp.Symbol, se.Symbol] = {}
+    for argument, symbols in inputs:
+        if isinstance(symbols, sp.Symbol):
+            renames[symbols] = se.Symbol(argument)
+        else:
+            renames.update({symbol: se.Symbol(f"{argument}[{i}]") for i, symbol in enumerate(symbols)})
+    return renames
+
+
 def expression_kernel(matrices: Mapping[str, sp.MatrixBase], inputs: Sequence[tuple[str, object]], *,
                       name: str = "expressions") -> Kernel:
     """The :class:`Kernel` ``name`` of the named ``matrices``, whose inputs are ``inputs``: pairs of an
     argument name and either one symbol (a scalar argument, e.g. the time) or a sequence of symbols
     (a vector argument, read as ``argument[i]``).  Print it with
     ``python_source(kernel, [argument for argument, _ in inputs])``."""
-    renames: dict = {}
-    for argument, symbols in inputs:
-        if isinstance(symbols, sp.Symbol):
-            renames[symbols] = se.Symbol(argument)
-        else:
-            renames.update({symbol: se.Symbol(f"{argument}[{i}]") for i, symbol in enumerate(symbols)})
-    converter = ExpressionConverter(renames)
+    converter = ExpressionConverter(input_renames(inputs))
     blocks = tuple(Block(key, sp.Matrix(matrix).shape) for key, matrix in matrices.items())
     converted = [converter.matrix(sp.Matrix(matrix), key) for key, matrix in matrices.items()]
     return cse_kernel(name, blocks, converted, converter.constants)
@@ -289,7 +302,7 @@ class ExpressionFunction:
     def __call__(self, *values) -> dict[str, np.ndarray]:
         """The matrices at one point (``values``: one float vector per input), each of its shape."""
         flat = np.array(self._scalar(*(np.asarray(value, dtype=float).tolist() for value in values)), dtype=float)
-        return self._split(flat)
+        return self.kernel.split(flat)
 
     def batch(self, *values) -> dict[str, np.ndarray]:
         """The matrices at N points (``values``: one (N, k) array per input), each (N, *shape)."""
@@ -299,11 +312,4 @@ class ExpressionFunction:
         flat = np.empty((n, self.kernel.size))
         for column, row in enumerate(rows):
             flat[:, column] = row
-        return self._split(flat)
-
-    def _split(self, flat: np.ndarray) -> dict[str, np.ndarray]:
-        values, start = {}, 0
-        for block in self.kernel.blocks:
-            values[block.name] = flat[..., start:start + block.size].reshape(flat.shape[:-1] + block.shape)
-            start += block.size
-        return values
+        return self.kernel.split(flat)

@@ -22,7 +22,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..core.errors import ActuationWarning, InputError
-from ..model.symbols import name_indices
 from .linalg import pseudo_inverses
 from .results import InverseDynamicsResult
 
@@ -37,8 +36,7 @@ def solve_inverse_dynamics(model: NumericModel, t, terms, q, qd, qdd, actuated, 
     """The stacked solution of :meth:`NumericModel.inverse_dynamics` at N states (``terms``: the
     blocks of the ``"dynamics"`` kernel, :func:`~kronlag.numeric.codegen.layouts.split_terms`, each with a
     leading N)."""
-    columns = name_indices(list(actuated), dict(zip(model.coordinate_names, range(model.m))),
-                           "actuated coordinate(s)")
+    columns = model.coordinate_indices(list(actuated), "actuated coordinate(s)")
     rows = constraint_rows(model, constraints)
     check_motion(model, t, terms, q, qd, qdd, rows, constraint_tol)
     n = len(t)

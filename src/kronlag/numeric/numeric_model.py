@@ -182,17 +182,7 @@ class NumericModel:
         p = self.parameter_vector(t)
         if extra:
             p = np.concatenate([p, np.fromiter(extra.values(), dtype=float, count=len(extra))])
-        return _blocks(kernel, library.evaluator(kernel.name, (kernel.size,))(t, q, qd, p))
-
-    def evaluate_expressions_batch(self, group: str, matrices: Callable[[], Mapping[str, sp.MatrixBase]], q,
-                                   qd=None, t=0.0) -> dict[str, np.ndarray]:
-        """:meth:`evaluate_expressions` at N states in one vectorised call (``q``, ``qd``: (N, m); ``t``:
-        a number or (N,)); each matrix by name as an array (N, *shape)."""
-        kernel, library = self._expression_library(group, matrices, ())
-        q = self._states(q, "q")
-        qd = None if qd is None else self._states(qd, "qd")
-        times, parameters = self._batch_times(t, len(q))
-        return _blocks(kernel, library.evaluate_batch(kernel.name, times, q, qd, parameters))
+        return kernel.split(library.evaluator(kernel.name, (kernel.size,))(t, q, qd, p))
 
     def _expression_library(self, group: str, matrices: Callable[[], Mapping[str, sp.MatrixBase]],
                             extra: tuple[sp.Symbol, ...]) -> tuple[codegen.Kernel, codegen.PythonLibrary]:
@@ -486,9 +476,10 @@ class NumericModel:
         """``(m, r, s)``: coordinates, holonomic and nonholonomic constraints."""
         return self.m, self.r, self.s
 
-    def coordinate_indices(self, keys: Sequence) -> list[int]:
-        """The indices of the coordinates ``keys`` (names or symbols); InputError naming unknown ones."""
-        return name_indices(list(keys), self._coordinate_index, "coordinate(s)")
+    def coordinate_indices(self, keys: Sequence, what: str = "coordinate(s)") -> list[int]:
+        """The indices of the coordinates ``keys`` (names or symbols); InputError naming the unknown ones
+        as ``what``."""
+        return name_indices(list(keys), self._coordinate_index, what)
 
     def state_vector(self, value, what: str = "q") -> np.ndarray:
         """``value`` as a float vector of shape (m,); InputError naming ``what`` otherwise."""
@@ -588,12 +579,3 @@ def _accessor(entry: catalogue.EquationMatrix) -> Callable[..., np.ndarray]:
 for _entry in catalogue.MATRICES.values():
     if _entry.accessor and _entry.name != "potential_energy":  # a float, see NumericModel.potential_energy
         setattr(NumericModel, _entry.name, _accessor(_entry))
-
-
-def _blocks(kernel: codegen.Kernel, flat: np.ndarray) -> dict[str, np.ndarray]:
-    """The blocks of a kernel's flat output (``(size,)`` or ``(N, size)``) by name, each of its shape."""
-    values, start = {}, 0
-    for block in kernel.blocks:
-        values[block.name] = flat[..., start:start + block.size].reshape(flat.shape[:-1] + block.shape)
-        start += block.size
-    return values

@@ -43,7 +43,7 @@ import numpy as np
 from ..core.errors import InputError
 
 __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
-           "STALL", "numerical_rank", "check_rank_rtol", "rank_magnitudes", "singular_ratio", "c_macros"]
+           "STALL", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes", "singular_ratio", "c_macros"]
 
 #: Default relative rank tolerance on ``[Phi_q; A]`` (see the module docstring).
 RANK_RTOL = 1e-8
@@ -78,6 +78,12 @@ def numerical_rank(magnitudes: np.ndarray, rank_rtol: float) -> int:
     if magnitudes.size == 0 or not magnitudes.max() > 0.0:
         return 0
     return int(np.count_nonzero(magnitudes > rank_rtol * magnitudes.max()))
+
+
+def matrix_rank(matrix: np.ndarray, rank_rtol: float = RANK_RTOL) -> int:
+    """The :func:`numerical_rank` of ``matrix`` by its singular values (0 for an empty one)."""
+    matrix = np.asarray(matrix, dtype=float)
+    return numerical_rank(np.linalg.svd(matrix, compute_uv=False), rank_rtol) if matrix.size else 0
 
 
 def rank_magnitudes(Phi_q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

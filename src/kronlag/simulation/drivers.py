@@ -23,7 +23,7 @@ from ..core.errors import CompilerError, InputError
 from ..numeric import codegen
 from ..numeric.tolerances import numerical_rank
 from .interface import DriverOptions, Progress, c_declarations, doubles
-from .problem import MultibodyProblem, Solution, Solver, SolverOptions
+from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
 from .stepping import SUCCESS, approach_text
 from .trajectory import Result, SingularPassage
 
@@ -188,9 +188,8 @@ def _buffers(model: NumericModel, rows: int) -> dict[str, np.ndarray]:
     ``y_end``; C-contiguous parts of one block (one allocation: with outputs at every step, ``rows``
     is large and the driver touches only the rows it writes)."""
     m, r, s = model.m, model.r, model.s
-    shapes = {"t_out": (rows,), "y_out": (rows, 2 * m), "qdd": (rows, m), "lam": (rows, r), "mu": (rows, s),
-              "kinetic_energy": (rows,), "potential_energy": (rows,), "position_residual": (rows, r),
-              "velocity_residual": (rows, r + s), "events": (_MAX_EVENTS, 5 + m), "y_end": (2 * m,)}
+    shapes = {"t_out": (rows,), "y_out": (rows, 2 * m), **derived_shapes(rows, m, r, s),
+              "events": (_MAX_EVENTS, 5 + m), "y_end": (2 * m,)}
     ends = list(accumulate((math.prod(shape) for shape in shapes.values()), initial=0))
     block = np.empty(ends[-1])
     return {name: block[start:end].reshape(shape) for (name, shape), start, end in zip(shapes.items(), ends, ends[1:])}

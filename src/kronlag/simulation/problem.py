@@ -23,7 +23,7 @@ from .trajectory import Result, SingularPassage
 if TYPE_CHECKING:
     from ..numeric.numeric_model import NumericModel
 
-__all__ = ["MultibodyProblem", "Solution", "SolverOptions", "Solver"]
+__all__ = ["MultibodyProblem", "Solution", "SolverOptions", "Solver", "derived_shapes"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,6 +93,12 @@ class MultibodyProblem:
                                                                terms=positions.terms)])
 
 
+def derived_shapes(rows: int, m: int, r: int, s: int) -> dict[str, tuple[int, ...]]:
+    """The quantities derived at ``rows`` outputs (:attr:`Solution.derived`) and their shapes, by name."""
+    return {"qdd": (rows, m), "lam": (rows, r), "mu": (rows, s), "kinetic_energy": (rows,),
+            "potential_energy": (rows,), "position_residual": (rows, r), "velocity_residual": (rows, r + s)}
+
+
 @dataclass(frozen=True, eq=False)
 class Solution:
     """Raw solver output: states ``y = [q, qd]`` at the output times.
@@ -124,9 +130,8 @@ class Solution:
     derived: dict[str, np.ndarray] | None = None
     events: tuple[SingularPassage, ...] = ()
 
-    #: The keys of :attr:`derived`.
-    DERIVED: ClassVar[tuple[str, ...]] = ("qdd", "lam", "mu", "kinetic_energy", "potential_energy",
-                                          "position_residual", "velocity_residual")
+    #: The keys of :attr:`derived` (:func:`derived_shapes`).
+    DERIVED: ClassVar[tuple[str, ...]] = tuple(derived_shapes(0, 0, 0, 0))
 
     @property
     def status(self) -> int:

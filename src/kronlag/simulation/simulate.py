@@ -16,7 +16,7 @@ import numpy as np
 
 from ..core.errors import AssemblyError, InitialStateWarning, InputError, SingularConfigurationError
 from ..numeric.linalg import velocity_constraints
-from .problem import MultibodyProblem, Solution, Solver, SolverOptions
+from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
 from .solvers import AUTO_PREFERENCE, METHODS
 from .trajectory import Trajectory
 
@@ -40,11 +40,8 @@ def _output_times(t_eval: Sequence[float] | np.ndarray | None, t0: float, t1: fl
 def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray) -> dict[str, np.ndarray]:
     """The :attr:`Solution.derived` arrays at ``states`` (N, 2 m), by the model's Python interface
     (NaN accelerations and multipliers where the configuration is singular)."""
-    m, r, s = model.m, model.r, model.s
-    n = len(times)
-    derived = {"qdd": np.full((n, m), np.nan), "lam": np.full((n, r), np.nan), "mu": np.full((n, s), np.nan),
-               "kinetic_energy": np.empty(n), "position_residual": np.empty((n, r)),
-               "velocity_residual": np.empty((n, r + s))}
+    m = model.m
+    derived = {name: np.full(shape, np.nan) for name, shape in derived_shapes(len(times), *model.shape).items()}
     for k, (t, y) in enumerate(zip(times, states)):
         q, qd = y[:m], y[m:]
         with suppress(SingularConfigurationError):  # the state a failed integration ended in
@@ -52,6 +49,7 @@ def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray) -> dict
             derived["qdd"][k], derived["lam"][k], derived["mu"][k] = result.qdd, result.lam, result.mu
         terms = model.dynamics_terms(q, qd, t)
         derived["kinetic_energy"][k] = 0.5 * qd @ terms["M"] @ qd
+        derived["potential_energy"][k] = model.potential_energy(q, t)
         derived["position_residual"][k] = terms["Phi"]
         B, c = velocity_constraints(terms)
         derived["velocity_residual"][k] = B @ qd + c
@@ -61,10 +59,7 @@ def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray) -> dict
 def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, started: float) -> Trajectory:
     """The :class:`Trajectory` of ``solution``, with the derived quantities at its output times."""
     model, m = problem.model, problem.m
-    derived = dict(solution.derived if solution.derived is not None else _derived(model, solution.t, solution.y))
-    if "potential_energy" not in derived:
-        derived["potential_energy"] = np.array([model.potential_energy(y[:m], t)
-                                                for t, y in zip(solution.t, solution.y)])
+    derived = solution.derived if solution.derived is not None else _derived(model, solution.t, solution.y)
     return Trajectory(t=solution.t, q=solution.y[:, :m], qd=solution.y[:, m:], **derived,
                       coordinate_names=tuple(model.coordinate_names), model=model,
                       method=method, message=solution.message, nfev=solution.nfev,

@@ -40,7 +40,7 @@ import sympy as sp
 
 from ..core.errors import InputError
 from ..numeric.linalg import pseudo_inverses
-from ..numeric.tolerances import RANK_RTOL, numerical_rank
+from ..numeric.tolerances import RANK_RTOL, matrix_rank, numerical_rank
 from ..simulation.trajectory import Result, Trajectory
 from .tangent import TangentEvaluator, tangent_matrices
 
@@ -49,11 +49,6 @@ if TYPE_CHECKING:
     from ..symbolic.equations import Equations
 
 __all__ = ["LinearModel", "linearize", "symbolic_linearization", "independent_coordinates"]
-
-
-def _rank(matrix: np.ndarray, rank_rtol: float) -> int:
-    """The numerical rank of ``matrix`` by the rank policy (:func:`kronlag.numeric.tolerances.numerical_rank`)."""
-    return numerical_rank(np.linalg.svd(matrix, compute_uv=False), rank_rtol) if matrix.size else 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -264,8 +259,8 @@ def linearize(model: NumericModel, q, qd=None, *, t: float = 0.0, independent: S
     if independent is not None:
         chosen = sorted(model.coordinate_indices(list(independent)))
         dependent = [i for i in range(m) if i not in chosen]
-        rank = _rank(Phi_q, model.rank_rtol)
-        if len(chosen) != m - rank or (r and _rank(Phi_q[:, dependent], model.rank_rtol) != rank):
+        rank = matrix_rank(Phi_q, model.rank_rtol)
+        if len(chosen) != m - rank or (r and matrix_rank(Phi_q[:, dependent], model.rank_rtol) != rank):
             raise InputError(f"independent coordinates {[names[i] for i in chosen]} do not parametrize the "
                              f"constraint manifold at q: need {m - rank} coordinates whose complement "
                              f"{[names[i] for i in dependent]} has Phi_q columns of full rank {rank}")

@@ -396,7 +396,6 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
         ``f_Q`` (m x 1); on first access ``C_christoffel`` (m x m), ``dM_dq``
         (m x m²), ``Md``, ``gamma`` and ``gamma_nh``.
 
-
     References
     ----------
     .. [1] N. Van Khang, "Kronecker product and a new matrix form of Lagrangian equations with

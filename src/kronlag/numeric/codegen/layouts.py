@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping
 
 import numpy as np
 
+from ...core.kernels import Kernel
 from ...symbolic import matrices
 
 __all__ = ["LAYOUTS", "layout", "layout_macros", "split_terms", "dynamics_shape"]
@@ -63,7 +63,7 @@ def split_terms(shape: tuple[int, int, int], flat: np.ndarray) -> dict[str, np.n
             for name, offset, block in layout("dynamics", *shape)}
 
 
-def dynamics_shape(blocks: Mapping[str, tuple[int, int]] | object) -> tuple[int, int, int]:
-    """``(m, r, s)`` from the blocks of the ``"dynamics"`` kernel (a :class:`~kronlag.core.kernels.Kernel`)."""
-    rows = {block.name: block.shape[0] for block in blocks.blocks}
+def dynamics_shape(kernel: Kernel) -> tuple[int, int, int]:
+    """``(m, r, s)`` from the blocks of the ``"dynamics"`` kernel."""
+    rows = {block.name: block.shape[0] for block in kernel.blocks}
     return rows["M"], rows["Phi"], rows["A"]

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import symengine as se
 import sympy as sp
 
-from ...core.kernels import Block, ExpressionConverter, Kernel, cse_kernel
+from ...core.kernels import Block, ExpressionConverter, Kernel, cse_kernel, expression_kernel, input_renames
 from ...symbolic import matrices
 from .layouts import LAYOUTS
 
@@ -40,10 +40,7 @@ class KernelSource:
     def __init__(self, equations: Equations):
         self.equations = equations
         self.m = equations.shape[0]
-        renames = {equations.time: se.Symbol("t")}
-        for prefix, symbols in (("q", equations.coordinates), ("qd", equations.speeds),
-                                ("p", equations.parameters)):
-            renames.update({symbol: se.Symbol(f"{prefix}[{i}]") for i, symbol in enumerate(symbols)})
+        renames = input_renames(self._inputs())
         self.convert = ExpressionConverter(renames)
         self.q = [renames[symbol] for symbol in equations.coordinates]
         self.qd = [renames[symbol] for symbol in equations.speeds]
@@ -91,21 +88,17 @@ class KernelSource:
         blocks = tuple(Block(block, _rows_and_columns(block, self.equations.shape)) for block in names)
         return cse_kernel(name, blocks, [self.matrix(block) for block in names], self.convert.constants)
 
+    def _inputs(self, extra: Sequence[sp.Symbol] = ()) -> list[tuple[str, object]]:
+        """The inputs of every kernel, ``(t, q, qd, p)``; ``extra`` symbols are read from ``p`` after
+        the parameters."""
+        eq = self.equations
+        return [("t", eq.time), ("q", eq.coordinates), ("qd", eq.speeds), ("p", (*eq.parameters, *extra))]
+
     def expression_kernel(self, name: str, expressions: Mapping[str, sp.MatrixBase],
                           extra: Sequence[sp.Symbol] = ()) -> Kernel:
         """A kernel of further expressions of ``(t, q, qd, parameters, extra)`` (body points, joint
-        reactions, the Jacobians of a linearization), one block per entry of ``expressions``; the
-        ``extra`` symbols are read from ``p`` after the parameters."""
-        converter = self.convert
-        if extra:
-            offset = len(self.equations.parameters)
-            converter = ExpressionConverter({**{symbol: value for symbol, value in self.convert.memo.items()
-                                                if isinstance(symbol, sp.Symbol)},
-                                             **{symbol: se.Symbol(f"p[{offset + i}]")
-                                                for i, symbol in enumerate(extra)}})
-        blocks = tuple(Block(block, matrix.shape) for block, matrix in expressions.items())
-        converted = [converter.matrix(matrix, block) for block, matrix in expressions.items()]
-        return cse_kernel(name, blocks, converted, converter.constants)
+        reactions, the Jacobians of a linearization), one block per entry of ``expressions``."""
+        return expression_kernel(expressions, self._inputs(extra), name=name)
 
 
 def _rows_and_columns(name: str, shape: tuple[int, int, int]) -> tuple[int, int]:

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
 
-from ...numeric.tolerances import numerical_rank
+from ...numeric.tolerances import matrix_rank
 from ..drivers import Segment, require, segment_status, solution_of
 from ..problem import MultibodyProblem, Solution, Solver
 from .ali3p import Index3Solver, index3_segment
@@ -41,8 +40,7 @@ class SwitchingSolver(Solver):
     def solve(self, problem: MultibodyProblem) -> Solution:
         require(self, problem.model)
         model, options = problem.model, self.options
-        redundant = model.r and numerical_rank(np.linalg.svd(model.Phi_q(problem.q0, problem.t0),
-                                                             compute_uv=False), model.rank_rtol) < model.r
+        redundant = model.r and matrix_rank(model.Phi_q(problem.q0, problem.t0), model.rank_rtol) < model.r
         segments: list[Segment] = []
         t, y, index3 = problem.t0, problem.y0, bool(redundant)
         while True:
