@@ -237,6 +237,8 @@ def parse_expression(text: str, symbols: Mapping[str, sp.Symbol], *, what: str =
         raise ExpressionError(f"{what}: the expression is longer than {MAX_LENGTH} characters")
     if not text.strip():
         raise reader.fail("the expression is empty")
+    if "\x00" in text:  # Python 3.11.2 raises ValueError for it, later 3.11 releases SyntaxError: say it alike
+        raise reader.fail("syntax error (source code string cannot contain null bytes)")
     try:
         tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as error:
