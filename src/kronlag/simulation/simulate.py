@@ -158,7 +158,7 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
     KeyboardInterrupt
         On Ctrl-C (SIGINT), within a fraction of a second for every method, raised once the
         integration has stopped, with the run up to the last accepted step as its attribute
-        ``trajectory`` (``result`` :attr:`Result.INTERRUPTED`).  So when SIGINT has Python's
+        ``trajectory`` (``result`` :attr:`Result.INTERRUPTED`).  This holds when SIGINT has Python's
         default handler and ``simulate`` runs on the main thread (else the signal is left to the
         program's own handler); a second Ctrl-C raises at once, without the trajectory.
     Exception
