@@ -6,7 +6,8 @@ lists them) or the path of a TOML model file (format: :mod:`kronlag.modelfile`).
 Exit status: 0 success; 2 bad input, found before any computation (one line
 on stderr, no traceback); 1 the run did not complete: a numerical failure or an
 output that could not be written (the other outputs are written, and what was
-computed is saved; stderr says where).
+computed is saved; stderr says where); 130 interrupted by Ctrl-C (what was
+computed is saved as well).
 
 The exit status follows the class of what went wrong (:data:`EXIT_CODES`, the hierarchy of
 :mod:`kronlag.core.errors`): bad input (:class:`~kronlag.core.errors.InputError`, an unreadable
@@ -24,14 +25,17 @@ from collections.abc import Callable, Sequence
 
 from ..core.errors import CompilerError, InputError, NumericalError
 from . import analysis_commands, commands
-from .outputs import IncompleteRun
+from .outputs import IncompleteRun, RunInterrupted
 
-__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_INCOMPLETE", "EXIT_BAD_INPUT", "EXIT_CODES"]
+__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_INCOMPLETE", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "EXIT_CODES"]
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT = 0, 1, 2
+#: Ctrl-C (SIGINT), as shells report a command it ended: 128 + 2.
+EXIT_INTERRUPTED = 130
 
 #: Exit status and message prefix by exception class, the first match in this order.
 EXIT_CODES: tuple[tuple[type[BaseException], int, str], ...] = (
+    (RunInterrupted, EXIT_INTERRUPTED, ""),
     (IncompleteRun, EXIT_INCOMPLETE, ""),
     (NumericalError, EXIT_INCOMPLETE, "numerical failure: "),
     (CompilerError, EXIT_INCOMPLETE, "compiled code: "),
@@ -74,6 +78,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         status, prefix = next((status, prefix) for kind, status, prefix in EXIT_CODES if isinstance(error, kind))
         print(f"kronlag: {prefix}{error}", file=sys.stderr)
         return status
+    except KeyboardInterrupt:  # Ctrl-C where no partial result is kept (a simulation's: RunInterrupted)
+        print("kronlag: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     return EXIT_OK
 
 

@@ -217,16 +217,23 @@ def _simulate(arguments: argparse.Namespace) -> None:
     outputs = requested_outputs(_SIMULATION_OUTPUTS, arguments, model)
     t_end = arguments.t_end if arguments.t_end is not None else model.simulation.t_end
     bar = ProgressBar(t_end, sys.stderr)
-    trajectory = simulate_model(model, t_end=t_end, method=arguments.method, rtol=arguments.rtol,
-                                atol=arguments.atol, t_eval=_output_grid(t_end, arguments, _default_points(t_end)),
-                                max_steps=arguments.max_steps, progress=bar)
+    interrupted = False
+    try:
+        trajectory = simulate_model(model, t_end=t_end, method=arguments.method, rtol=arguments.rtol,
+                                    atol=arguments.atol, t_eval=_output_grid(t_end, arguments, _default_points(t_end)),
+                                    max_steps=arguments.max_steps, progress=bar)
+    except KeyboardInterrupt as interrupt:  # Ctrl-C: the partial run is written as a failed one is
+        if not hasattr(interrupt, "trajectory"):
+            raise
+        trajectory, interrupted = interrupt.trajectory, True
     bar.close()
     print(summarize(trajectory).report())
     reached = trajectory.t[-1] if len(trajectory.t) else 0.0
-    failure = "" if trajectory.success else (f"simulation failed: {_failure_hint(trajectory.message)}; "
-                                             f"the trajectory reaches t = {reached:g}")
+    failure = f"{trajectory.message.rstrip('.')}; the trajectory reaches t = {reached:g}" if interrupted else (
+        "" if trajectory.success else (f"simulation failed: {_failure_hint(trajectory.message)}; "
+                                       f"the trajectory reaches t = {reached:g}"))
     finish_run(trajectory, outputs, arguments, model, failure=failure, save=trajectory.to_npz,
-                rescue_name=f"{file_stem(model.system.name)}-trajectory.npz")
+                rescue_name=f"{file_stem(model.system.name)}-trajectory.npz", interrupted=interrupted)
 
 
 def _drives(arguments: argparse.Namespace, model: ModelFile) -> dict:

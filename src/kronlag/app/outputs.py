@@ -13,11 +13,15 @@ from pathlib import Path
 from ..core.errors import ModelError
 from ..model.modelfile import ModelFile
 
-__all__ = ["IncompleteRun", "OutputKind", "PLOT_SUFFIXES", "no_check", "requested_outputs", "finish_run", "emit"]
+__all__ = ["IncompleteRun", "RunInterrupted", "OutputKind", "PLOT_SUFFIXES", "no_check", "requested_outputs", "finish_run", "emit"]
 
 
 class IncompleteRun(Exception):
     """A run did not finish or an output could not be written; the message says what was saved."""
+
+
+class RunInterrupted(IncompleteRun):
+    """A run stopped by Ctrl-C (SIGINT); what it computed is saved as an incomplete run's is."""
 
 
 @dataclass(frozen=True)
@@ -98,16 +102,18 @@ def _rescue(save: Callable[[Path], None], name: str) -> Path:
 
 
 def finish_run(result, outputs: list[tuple[OutputKind, Path]], arguments: argparse.Namespace,
-                model: ModelFile, *, failure: str, save: Callable[[Path], None], rescue_name: str) -> None:
+                model: ModelFile, *, failure: str, save: Callable[[Path], None], rescue_name: str,
+                interrupted: bool = False) -> None:
     """Write the outputs; if the run failed (``failure`` not empty) or an output could not be written,
-    make sure the result is saved somewhere and raise :class:`IncompleteRun` saying where."""
+    make sure the result is saved somewhere and raise :class:`IncompleteRun` saying where
+    (:class:`RunInterrupted` for a run stopped by Ctrl-C, ``interrupted``)."""
     written, failures = _write_outputs(result, outputs, arguments, model)
     if not failure and not failures:
         return
     saved = [path for kind, path in written if kind.option == "--output"]
     where = saved[0] if saved else _rescue(save, rescue_name)
     problems = ([failure] if failure else []) + [f"could not write {line}" for line in failures]
-    raise IncompleteRun("; ".join(problems) + f"; the results are saved in {where}")
+    raise (RunInterrupted if interrupted else IncompleteRun)("; ".join(problems) + f"; the results are saved in {where}")
 
 
 def emit(text: str, output: str | None) -> None:

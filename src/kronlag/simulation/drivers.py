@@ -22,9 +22,9 @@ import numpy as np
 from ..core.errors import CompilerError, InputError
 from ..numeric import codegen
 from ..numeric.tolerances import numerical_rank
-from .interface import DriverOptions, Progress, c_declarations, doubles
+from .interface import DriverOptions, c_declarations, doubles
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
-from .stepping import SUCCESS, approach_text
+from .stepping import SUCCESS, approach_text, stopped_text
 from .trajectory import Result, SingularPassage
 
 if TYPE_CHECKING:
@@ -112,14 +112,15 @@ _LOADED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
     """The shared library of ``model`` with the driver ``kind`` of :data:`DRIVERS`: the model's C
-    source, the kernels, :func:`~.interface.c_declarations`, ``monitor.c`` and the driver's file."""
+    source, the kernels, :func:`~.interface.c_declarations`, ``monitor.c``, ``progress.c`` and the
+    driver's file."""
     libraries = _LOADED.setdefault(model, {})
     if kind not in libraries:
         spec = DRIVERS[kind]
         if spec.sundials:
             _load_sundials()
         library = _driver_library(model.c_source + model.c_kernels(*spec.kernels) + c_declarations()
-                                  + _c_file("monitor.c") + _c_file(spec.file))
+                                  + _c_file("monitor.c") + _c_file("progress.c") + _c_file(spec.file))
         function = getattr(library, spec.entry)
         function.argtypes, function.restype = [ctypes.POINTER(DriverOptions)], ctypes.c_int
         if spec.flag_names:
@@ -211,10 +212,11 @@ def run(kind: str, problem: MultibodyProblem, options: SolverOptions, t0: float,
     arrays = {"p": p, "y0": y0, "t_eval": times}
     arrays |= {name: value for name, value in inputs.items() if isinstance(value, np.ndarray)}
     arrays = {name: np.ascontiguousarray(value, dtype=float) for name, value in arrays.items()}
+    progress, progress_interval = options.control.c_progress(options.progress)
     fields = {"n_parameters": len(p), "t0": t0, "t1": problem.t1, "rtol": options.rtol, "atol": options.atol,
               "max_step": options.max_step if np.isfinite(options.max_step) else 0.0, "max_steps": options.max_steps,
               "max_order": options.max_order or 0, "n_eval": len(times), "max_rows": rows, "max_events": _MAX_EVENTS,
-              "t_end": t0, "progress": Progress(options.progress) if options.progress is not None else Progress()}
+              "t_end": t0, "progress": progress, "progress_interval": progress_interval}
     fields |= {name: value for name, value in inputs.items() if name not in arrays}
     arguments = DriverOptions(**fields, **{name: doubles(array) for name, array in (arrays | buffers).items()})
     flag = getattr(library, DRIVERS[kind].entry)(ctypes.byref(arguments))
@@ -235,6 +237,8 @@ def segment_status(segment: Segment, model: NumericModel, kind: str) -> tuple[Re
     q = segment.y_end[:model.m]
     if result is Result.APPROACH:
         return result, approach_text(segment.t_end, q)
+    if result in (Result.INTERRUPTED, Result.RAISED):
+        return result, stopped_text(segment.t_end, result)
     reason, spec = result.value, DRIVERS[kind]
     if result is Result.SOLVER_FAILED and spec.flag_names:
         name = getattr(driver(model, kind), spec.flag_names)(segment.flag).decode()

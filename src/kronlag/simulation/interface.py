@@ -20,8 +20,9 @@ from .trajectory import Result
 __all__ = ["FIELDS", "DriverOptions", "Progress", "HANDBACK", "c_declarations", "c_declaration", "doubles"]
 
 
-#: ``progress(t)`` after every accepted step (a NULL pointer: none).
-Progress = ctypes.CFUNCTYPE(None, ctypes.c_double)
+#: ``progress(t)`` after accepted steps (a NULL pointer: none): 0 to go on, or the
+#: ``KRONLAG_RESULT_<NAME>`` code to end the run with (``INTERRUPTED``: Ctrl-C; ``RAISED``).
+Progress = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_double)
 
 #: A segment that ends because the motion is clear of a singular configuration, for the switching
 #: method to continue with the fast method (positive like :attr:`Result.APPROACH`, the hand-over the
@@ -53,7 +54,8 @@ FIELDS: tuple[tuple[str, type, str, str], ...] = (
     ("max_steps", _L, "in", "most accepted steps"),
     ("max_order", _I, "in", "highest order of a variable-order method (0: all it has)"),
     ("handback", _I, "in", "nonzero: end with KRONLAG_HANDBACK once clear of a singular configuration"),
-    ("progress", Progress, "in", "called with t after every accepted step (NULL: not)"),
+    ("progress", Progress, "in", "called with t after accepted steps (NULL: not); nonzero: the code to end with"),
+    ("progress_interval", _D, "in", "seconds between progress calls (0: after every accepted step)"),
     ("n_eval", _I, "in", "number of output times (0: every step is an output)"),
     ("t_eval", _DOUBLES, "in", "output times (n_eval), increasing"),
     ("max_rows", _I, "in", "rows of the output buffers"),

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 from ..core.errors import ProjectionError
 from ..numeric.projection import project_positions, project_velocities
+from .control import RunControl
 from .trajectory import Result, SingularPassage
 
 if TYPE_CHECKING:
@@ -154,6 +155,9 @@ class SolverOptions:
     max_steps: int
     progress: Callable[[float], object] | None
     max_order: int | None = None
+    #: What ends the run early (Ctrl-C, an exception in a callback): every solver asks it after each
+    #: accepted step (``control.report(progress, t)``, or the compiled drivers' ``progress``).
+    control: RunControl = field(default_factory=RunControl)
 
     @property
     def projection_tol(self) -> float:

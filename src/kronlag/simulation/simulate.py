@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core.errors import AssemblyError, InitialStateWarning, InputError, SingularConfigurationError
 from ..numeric.linalg import velocity_constraints
+from .control import RunControl
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
 from .solvers import AUTO_PREFERENCE, METHODS
 from .trajectory import Trajectory
@@ -139,7 +140,8 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         Most accepted steps; reaching it ends the integration with status -1.  By
         default 1000 per unit of simulated time, at least 100 000.
     progress : callable, optional
-        Called as ``progress(t)`` after every accepted step.
+        Called as ``progress(t)`` after every accepted step.  An exception it raises ends the
+        run like one raised by a time-varying parameter (see Raises).
 
     Returns
     -------
@@ -150,6 +152,19 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         configurations passed).  On failure (a singular
         configuration, an integrator error, ``max_steps``) ``status`` is -1,
         ``message`` says why, and the arrays hold the solution up to the failure.
+
+    Raises
+    ------
+    KeyboardInterrupt
+        On Ctrl-C (SIGINT), within a fraction of a second for every method, raised once the
+        integration has stopped, with the run up to the last accepted step as its attribute
+        ``trajectory`` (``result`` :attr:`Result.INTERRUPTED`).  This holds when SIGINT has Python's
+        default handler and ``simulate`` runs on the main thread (else the signal is left to the
+        program's own handler); a second Ctrl-C raises at once, without the trajectory.
+    Exception
+        An exception raised by a time-varying parameter's function or by ``progress`` ends the run
+        at the last accepted step and propagates with the partial trajectory as its attribute
+        ``trajectory`` (``result`` :attr:`Result.RAISED`, the exception in ``message``).
 
     Examples
     --------
@@ -173,8 +188,9 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         raise InputError(f"max_steps must be an integer >= 1, got {max_steps!r}")
     solver = _resolve_method(method, model)
     default_stabilization = solver.stabilization
+    control = RunControl()
     options = SolverOptions(rtol=rtol, atol=atol, max_step=np.inf if max_step is None else float(max_step),
-                            max_steps=int(max_steps), progress=progress)
+                            max_steps=int(max_steps), progress=progress, control=control)
     start = MultibodyProblem(model=model, t0=t0, t1=t1, q0=np.asarray(q0, dtype=float).ravel(),
                              qd0=np.asarray(qd0, dtype=float).ravel(), t_eval=_output_times(t_eval, t0, t1),
                              alpha=default_stabilization if alpha is None else float(alpha),
@@ -187,8 +203,14 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         if bad:
             raise InputError(f"{label} is not finite for {', '.join(bad)}")
     problem = replace(start, **dict(zip(("q0", "qd0"), _consistent_start(start, options))))
-    solution = solver(options).solve(problem)
-    return _trajectory(solution, problem, solver.name, started)
+    with control.catching_sigint():
+        solution = solver(options).solve(problem)
+        if control.error is not None:
+            error = control.error
+            solution = replace(solution, message=f"{solution.message}: {type(error).__name__}: {error}")
+        trajectory = _trajectory(solution, problem, solver.name, started)
+    control.raise_if_stopped(trajectory)
+    return trajectory
 
 
 #: The default ``max_steps``: this many per unit of simulated time, at least 100 000.

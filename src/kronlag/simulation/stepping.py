@@ -13,7 +13,7 @@ from ..numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes,
 from .problem import MultibodyProblem, Solution, SolverOptions
 from .trajectory import Result, SingularPassage
 
-__all__ = ["Stepper", "ApproachWatch", "march", "approach_text", "SUCCESS"]
+__all__ = ["Stepper", "ApproachWatch", "march", "approach_text", "stopped_text", "SUCCESS"]
 
 
 SUCCESS = Result.SUCCESS.value
@@ -78,13 +78,20 @@ def approach_text(t: float, q: np.ndarray) -> str:
     return f"Stopped at t = {t:.6g}, q = {np.array2string(q, precision=6)}: {Result.APPROACH.value}"
 
 
+def stopped_text(t: float, result: Result) -> str:
+    """The message of a run ended by Ctrl-C or a callback's exception (``result``) after the step to ``t``."""
+    return f"Integration stopped at t = {t:.6g}: {result.value}"
+
+
 def march(make_stepper: Callable[[], Stepper], problem: MultibodyProblem, options: SolverOptions) -> Solution:
     """Start ``make_stepper()`` and advance it to ``problem.t1``, collecting the outputs.
 
     Outputs are every accepted step (``t_eval is None``) or ``problem.t_eval``
     (interpolated inside each step).  A model failure, an integrator failure,
     ``options.max_steps`` steps or the approach to a singular configuration
-    (:class:`ApproachWatch`) end the loop with status -1.
+    (:class:`ApproachWatch`) end the loop with status -1; so do Ctrl-C and any other exception
+    (:attr:`Result.INTERRUPTED`, :attr:`Result.RAISED`: ``options.control`` holds it for
+    :func:`~kronlag.simulation.simulate` to raise).
     """
     every_step = problem.t_eval is None
     outputs = [] if every_step else [float(t) for t in problem.t_eval]
@@ -120,8 +127,10 @@ def march(make_stepper: Callable[[], Stepper], problem: MultibodyProblem, option
                 times.append(outputs[pending])
                 states.append(state)
                 pending += 1
-            if options.progress is not None:
-                options.progress(stepper.t)
+            stop = options.control.report(options.progress, stepper.t)
+            if stop is not None:
+                result, message = stop, stopped_text(stepper.t, stop)
+                break
             approach = watch.observe(stepper.t, stepper.y)
             if approach is not None:
                 result, message, events = Result.APPROACH, approach_text(stepper.t, approach.q), (approach,)
@@ -130,6 +139,10 @@ def march(make_stepper: Callable[[], Stepper], problem: MultibodyProblem, option
         where = stepper.t if stepper is not None else problem.t0
         result = Result.SINGULAR if isinstance(error, SingularConfigurationError) else Result.SOLVER_FAILED
         message = f"Integration failed at t = {where:.6g}: {type(error).__name__}: {error}"
+    except (Exception, KeyboardInterrupt) as error:  # noqa: BLE001 - simulate raises it with the partial result
+        options.control.record(error)
+        result = options.control.stop()
+        message = stopped_text(stepper.t if stepper is not None else problem.t0, result)
     nfev, njev = stepper.counters() if stepper is not None else (0, 0)
     return Solution(t=np.asarray(times, dtype=float), y=np.reshape(states, (len(states), 2 * problem.m)),
                     result=result, message=message, nfev=nfev, njev=njev, steps=steps, events=events)

@@ -36,6 +36,10 @@ class Result(enum.Enum):
     positive for a segment that ends to hand over to the other method of the switching solver,
     negative for a failure.  The failure codes lie below -999, apart from the flags of
     SUNDIALS CVODE (-1 to -99), which :meth:`of_code` reads as :attr:`SOLVER_FAILED`.
+
+    :attr:`INTERRUPTED` (Ctrl-C) and :attr:`RAISED` end a run that :func:`kronlag.simulate` does
+    not return: it raises (:class:`KeyboardInterrupt`, or the callback's exception) with the
+    partial trajectory as the exception's attribute ``trajectory``.
     """
 
     SUCCESS = 0, "The integration reached the end of the time span."
@@ -49,6 +53,8 @@ class Result(enum.Enum):
     NEWTON_FAILED = -1005, "Newton's method did not converge at the smallest step"
     PROJECTION_FAILED = -1002, "the projection onto the constraints failed"
     OUTPUTS_FULL = -1006, "more steps than output rows: pass t_eval to choose the outputs"
+    INTERRUPTED = -1007, "interrupted (Ctrl-C, SIGINT)"
+    RAISED = -1008, "a callback (a time-varying parameter or progress) raised an exception"
     SOLVER_FAILED = -1000, "the integrator failed"
 
     code: int
