@@ -36,7 +36,7 @@ from .codegen.layouts import split_terms
 from .inverse import solve_inverse_dynamics
 from .parameters import ParameterValues
 from .results import ForwardDynamicsBatch, ForwardDynamicsResult, InverseDynamicsResult
-from .tolerances import RANK_RTOL, check_rank_rtol
+from .tolerances import RANK_RTOL, check_rank_rtol, matrix_rank
 
 if TYPE_CHECKING:
     from ..symbolic.equations import Equations
@@ -494,6 +494,14 @@ class NumericModel:
         :func:`kronlag.numeric.assembly.assemble`."""
         return assemble(self, q_guess, fixed=fixed, qd_guess=qd_guess, qd_fixed=qd_fixed, tol=tol,
                         max_iterations=max_iterations, t=t)
+
+    def mobility(self, q, t: float = 0.0) -> int:
+        """The degrees of freedom at the (assembled) configuration ``q``: ``m`` minus the rank of
+        ``[Phi_q; A]`` there (the rank policy, :func:`~kronlag.numeric.tolerances.matrix_rank`), which
+        counts redundant constraints once; ``m - r - s`` only when every row is independent."""
+        q = self.state_vector(q)
+        terms = self.dynamics_terms(q, np.zeros(self.m), t)
+        return self.m - matrix_rank(np.vstack([terms["Phi_q"], terms["A"]]), self.rank_rtol)
 
     def __repr__(self) -> str:
         return (f"NumericModel({self.equations.system.name!r}, m={self.m}, r={self.r}, s={self.s}, "
