@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
-from ..core.errors import InputError, RedundantConstraintsWarning, SingularConfigurationError
+from ..core.errors import InputError, NumericalError, RedundantConstraintsWarning, SingularConfigurationError
 from ..model.bodies import check_parameter_values
 from ..model.symbols import name_indices
 from ..symbolic import matrices as catalogue
@@ -40,6 +40,10 @@ from .tolerances import RANK_RTOL, check_rank_rtol, matrix_rank
 
 if TYPE_CHECKING:
     from ..symbolic.equations import Equations
+
+#: What a state that is not finite is called, instead of a singular configuration (the compiled
+#: drivers' message too: :func:`kronlag.simulation.drivers.segment_status`).
+NOT_FINITE = "the state is not finite (the integration diverged before: not a singular configuration)"
 
 __all__ = ["NumericModel", "BATCH_MATRICES"]
 
@@ -314,10 +318,15 @@ class NumericModel:
         ------
         SingularConfigurationError
             M is not positive definite on the null space of ``[Phi_q; A]``.
+        NumericalError
+            ``q`` or ``qd`` is not finite (an integration that diverged, not a singular configuration).
         """
         parameters = self._parameters.vector(t) if self._constants is None else self._constants
         qdd, lam, mu, rank = self._forward(t, q, qd, parameters, alpha, beta)
         if rank < 0:
+            if not (np.isfinite(q).all() and np.isfinite(qd).all()):  # no configuration to judge
+                raise NumericalError(f"{NOT_FINITE} at t = {t!r}: q = {np.asarray(q).tolist()}, "
+                                     f"qd = {np.asarray(qd).tolist()}")
             raise SingularConfigurationError(q, qd, t)
         unique = rank == self.r + self.s
         if not unique and not self._warned_redundant:
