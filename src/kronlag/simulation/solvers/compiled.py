@@ -81,5 +81,6 @@ def cvode_segment(problem: MultibodyProblem, options: SolverOptions, t0: float, 
     """CVODE (Adams) on the Baumgarte ODE from ``(t0, y0)`` until ``t1`` or the approach to a
     singular configuration (:attr:`Result.APPROACH`)."""
     scaled = options.scaled(CompiledSolver.TOLERANCE_SCALE, CVODE_TIGHTEST)
-    return run("cvode", problem, scaled, t0, y0, projection_tol=scaled.projection_tol, alpha=problem.alpha,
-               beta=problem.beta)
+    # the outputs' projection no tighter than the floor either: |Phi| cannot be made smaller than rounding
+    return run("cvode", problem, scaled, t0, y0, projection_tol=max(scaled.projection_tol, CVODE_TIGHTEST),
+               alpha=problem.alpha, beta=problem.beta)
