@@ -4,6 +4,7 @@
   or at random numeric points;
 - numeric models of the built-in models with random parameter values, on either backend;
 - the paper's four-bar and quick-return written as bodies + joints;
+- a planar mechanism with redundant constraints (a parallelogram with a third crank);
 - trajectories built from closed-form kinematics, for testing graphics without
   :func:`kronlag.simulate` (kinematically exact, the constraints hold to rounding, but not
   dynamically meaningful: multipliers and energies are smooth stand-ins).
@@ -270,3 +271,33 @@ def heavy_top_trajectory(t: np.ndarray) -> Trajectory:
     qd = np.broadcast_to(rates, q.shape).copy()
     empty = np.zeros((len(t), 0))
     return _trajectory(models.heavy_top(), t, q, qd, empty, empty, HEAVY_TOP_PARAMETERS)
+
+
+# -- a mechanism with redundant constraints -------------------------------------------------------
+
+
+def double_parallelogram() -> kronlag.System:
+    """Three equal cranks (pivots at x = 0, d, 2 d) carrying one coupler: overconstrained (Grübler: 0 dof).
+
+    Coordinates: crank angles q1, q3, q4 and coupler angle q2; crank 2 (q3) pins the
+    coupler's midpoint, crank 3 (q4) its end.  Really one degree of freedom.
+    """
+    cos, sin = sp.cos, sp.sin
+    q1, q2, q3, q4 = kronlag.coordinates("q1 q2 q3 q4")
+    l, d, m, m_c, inertia, inertia_c, g = sp.symbols("l d m m_c J J_c g")
+    system = kronlag.System([q1, q2, q3, q4], parameters=[l, d, m, m_c, inertia, inertia_c, g],
+                            gravity=(0, -g), name="double_parallelogram")
+    for i, (angle, x) in enumerate(((q1, 0), (q3, d), (q4, 2 * d))):
+        system.add_body(kronlag.PlanarBody(f"crank {i + 1}", mass=m, inertia=inertia, angle=angle,
+                                           position=(x + l / 2 * cos(angle), l / 2 * sin(angle))))
+    start = (l * cos(q1), l * sin(q1))
+    system.add_body(kronlag.PlanarBody("coupler", mass=m_c, inertia=inertia_c, angle=q2,
+                                       position=(start[0] + d * cos(q2), start[1] + d * sin(q2))))
+    for i, (angle, x, distance) in enumerate(((q3, d, d), (q4, 2 * d, 2 * d))):
+        system.add_constraint(start[0] + distance * cos(q2) - x - l * cos(angle), name=f"x{i}")
+        system.add_constraint(start[1] + distance * sin(q2) - l * sin(angle), name=f"y{i}")
+    return system
+
+
+#: Values of :func:`double_parallelogram`.
+DOUBLE_PARALLELOGRAM_VALUES = dict(l=0.7, d=1.3, m=1.2, m_c=2.5, J=0.09, J_c=0.6, g=9.81)

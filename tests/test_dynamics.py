@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 import sympy as sp
-from helpers import backend_params, derived, numeric, parameter_values, random_state
+from helpers import backend_params, derived, double_parallelogram, numeric, parameter_values, random_state
 
 import kronlag
 from kronlag import models
@@ -179,28 +179,6 @@ def test_redundant_constraint_gives_the_same_accelerations(backend):
     # the constraint forces Phi_q^T lambda are unique, the minimum-norm lambda is one split of them
     np.testing.assert_allclose(redundant.Phi_q(q).T @ result.lam, plain.Phi_q(q).T @ reference.lam, rtol=1e-10)
     assert np.linalg.norm(result.lam) < np.linalg.norm(reference.lam)
-
-
-def double_parallelogram() -> kronlag.System:
-    """Three equal cranks (pivots at x = 0, d, 2 d) carrying one coupler: overconstrained (Grübler: 0 dof).
-
-    Coordinates: crank angles q1, q3, q4 and coupler angle q2; crank 2 (q3) pins the
-    coupler's midpoint, crank 3 (q4) its end.  Really one degree of freedom.
-    """
-    q1, q2, q3, q4 = kronlag.coordinates("q1 q2 q3 q4")
-    l, d, m, m_c, inertia, inertia_c, g = sp.symbols("l d m m_c J J_c g")
-    system = kronlag.System([q1, q2, q3, q4], parameters=[l, d, m, m_c, inertia, inertia_c, g],
-                            gravity=(0, -g), name="double_parallelogram")
-    for i, (angle, x) in enumerate(((q1, 0), (q3, d), (q4, 2 * d))):
-        system.add_body(kronlag.PlanarBody(f"crank {i + 1}", mass=m, inertia=inertia, angle=angle,
-                                           position=(x + l / 2 * cos(angle), l / 2 * sin(angle))))
-    start = (l * cos(q1), l * sin(q1))
-    system.add_body(kronlag.PlanarBody("coupler", mass=m_c, inertia=inertia_c, angle=q2,
-                                       position=(start[0] + d * cos(q2), start[1] + d * sin(q2))))
-    for i, (angle, x, distance) in enumerate(((q3, d, d), (q4, 2 * d, 2 * d))):
-        system.add_constraint(start[0] + distance * cos(q2) - x - l * cos(angle), name=f"x{i}")
-        system.add_constraint(start[1] + distance * sin(q2) - l * sin(angle), name=f"y{i}")
-    return system
 
 
 @pytest.mark.parametrize("backend", backend_params())

@@ -113,11 +113,12 @@ def assert_order(slope: float, order: int, what: str) -> None:
 #: Steps per T_FIXED and tolerances under which the error test passes at every step.  ALI3-P
 #: stops Newton's method at 1e-3 of its error tolerance and the trapezoidal rule turns an
 #: unconverged position into an acceleration error 4/h^2 times larger: its tolerances are tight
-#: (1e-8, rtol divided by Index3Solver.TOLERANCE_SCALE) and its steps short enough to pass them.
+#: (1e-8 for both after the division by Index3Solver.TOLERANCE_SCALE) and its steps short enough to
+#: pass them.
 FIXED_STEPS = {
     "baumgarte": ((12, 16, 24, 32, 48), {"rtol": 1e6, "atol": 1e-12}),
     "projection": ((8, 12, 16, 24), {"rtol": 1e6, "atol": 1e-12}),
-    "ali3p": ((1600, 3200, 6400, 12800), {"rtol": 3e-5, "atol": 1e-8}),
+    "ali3p": ((1600, 3200, 6400, 12800), {"rtol": 3e-3, "atol": 3e-3}),
 }
 
 
@@ -148,8 +149,9 @@ def test_fixed_order_method_converges_at_its_order(method):
 #: Orders checked by their convergence (1. of the module docstring) and the tolerances (powers of
 #: ten, in half decades) over which each converges at its order with the error above rounding.
 CAPS = {
-    "compiled": {1: (-3, -6), 2: (-4, -9), 3: (-5, -11), 4: (-5, -12)},
-    "switching": {1: (-3, -6), 2: (-4, -9)},
+    # CVODE runs at the requested tolerances divided by CompiledSolver.TOLERANCE_SCALE (1e4)
+    "compiled": {1: (-1, -4), 2: (-2, -7), 3: (-3, -9), 4: (-3, -10)},
+    "switching": {1: (-1, -4), 2: (-2, -7)},
     "ggl": {1: (-3, -5), 2: (-4, -7)},
 }
 OUTPUTS = np.linspace(0.0, T_VARIABLE, 21)

@@ -1,7 +1,7 @@
 """Whole tasks on a model file: check it, simulate it, analyse the kinematics and run inverse
 dynamics along prescribed motions.  The command-line interface is a thin shell over these.
 
-:func:`check_model` works on the symbolic equations alone; :func:`simulate_model`,
+:func:`check_model` works on the symbolic equations (and the numeric model for the mobility); :func:`simulate_model`,
 :func:`kinematics_along` and :func:`inverse_dynamics_along` use the numeric layer
 (``Equations.numeric``, :func:`kronlag.simulate`, :mod:`kronlag.drives`).
 """
@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
-from ..core.errors import ModelError
+from ..core.errors import ModelError, NumericalError
 from ..core.kernels import ExpressionFunction
 from ..model.expressions import parse_expression
 from ..model.modelfile import ModelFile, PrescribedMotion
@@ -62,7 +62,11 @@ class ModelCheck:
     m, r, s : int
         Coordinates, holonomic and nonholonomic constraints.
     degrees_of_freedom : int
-        ``m - r - s``.
+        The mobility, ``m - rank [Phi_q; A]`` at the assembled initial state
+        (:meth:`NumericModel.mobility`): redundant constraints count once.  ``m - r - s`` when
+        values are missing or the state cannot be assembled (``mobility_at`` says which).
+    mobility_at : str
+        Where ``degrees_of_freedom`` was counted: ``"the assembled state"`` or ``"m - r - s"``.
     missing_values : tuple of str
         Parameters without a value (the numeric checks need them all).
     rank_Phi_q, rank_A : int or None
@@ -76,6 +80,7 @@ class ModelCheck:
     r: int
     s: int
     degrees_of_freedom: int
+    mobility_at: str
     missing_values: tuple[str, ...]
     rank_Phi_q: int | None
     rank_A: int | None
@@ -85,7 +90,7 @@ class ModelCheck:
         """A few lines of text for people."""
         lines = [f"model {self.name}: m = {self.m} coordinates, r = {self.r} holonomic and "
                  f"s = {self.s} nonholonomic constraints",
-                 f"degrees of freedom m - r - s = {self.degrees_of_freedom}"]
+                 self._freedom_line()]
         if self.missing_values:
             lines.append("parameters without values: " + ", ".join(self.missing_values)
                          + " (numeric checks skipped)")
@@ -98,14 +103,27 @@ class ModelCheck:
             lines.append(f"max |Phi(q)| at the initial guess: {self.constraint_residual:.3g}")
         return "\n".join(lines)
 
+    def _freedom_line(self) -> str:
+        naive = self.m - self.r - self.s
+        if self.mobility_at == _NAIVE:
+            return f"degrees of freedom m - r - s = {naive}"
+        note = "" if self.degrees_of_freedom == naive else f"; m - r - s = {naive}: dependent constraints"
+        return f"degrees of freedom = {self.degrees_of_freedom} (m - rank [Phi_q; A] at {self.mobility_at}{note})"
+
+
+#: :attr:`ModelCheck.mobility_at` when the mobility could not be counted at an assembled state.
+_NAIVE = "m - r - s"
+
 
 def check_model(model: ModelFile, *, equations: Equations | None = None) -> ModelCheck:
     """Derive the equations and check the constraints at the initial guess (at ``t = 0``).
 
     Evaluates ``Phi``, ``Phi_q`` and ``A`` through a kernel of the symbolic matrices
-    (:class:`kronlag.core.kernels.ExpressionFunction`; no numeric model is built, so a model
-    with missing values is still checked as far as it can be), ranks by the rank policy
-    (:func:`kronlag.numeric.tolerances.numerical_rank`).
+    (:class:`kronlag.core.kernels.ExpressionFunction`, so a model with missing values is still
+    checked as far as it can be), ranks by the rank policy
+    (:func:`kronlag.numeric.tolerances.numerical_rank`).  With every value given and some
+    constraint, the numeric model assembles the initial state and the degrees of freedom are its
+    mobility there (:meth:`NumericModel.mobility`).
     """
     eom = equations if equations is not None else derive(model.system)
     m, r, s = eom.shape
@@ -121,7 +139,15 @@ def check_model(model: ModelFile, *, equations: Equations | None = None) -> Mode
         at_guess = evaluate(0.0, q, qd, [values[p.name] for p in eom.parameters])
         rank_phi, rank_a = (matrix_rank(at_guess[name]) for name in ("Phi_q", "A"))  # no model yet: default rtol
         residual = float(np.max(np.abs(at_guess["Phi"]), initial=0.0))
-    return ModelCheck(name=system.name, m=m, r=r, s=s, degrees_of_freedom=m - r - s, missing_values=missing,
+    freedom, at = m - r - s, _NAIVE
+    if not missing and r + s:
+        try:
+            numeric = numeric_model(model, equations=eom)
+            freedom, at = numeric.mobility(initial_state(model, numeric)[0]), "the assembled state"
+        except NumericalError:  # not assembled: the rank at a state off the constraints means nothing
+            pass
+    return ModelCheck(name=system.name, m=m, r=r, s=s, degrees_of_freedom=freedom, mobility_at=at,
+                      missing_values=missing,
                       rank_Phi_q=rank_phi, rank_A=rank_a, constraint_residual=residual)
 
 

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
-from ..core.errors import InputError, RedundantConstraintsWarning, SingularConfigurationError
+from ..core.errors import InputError, NumericalError, RedundantConstraintsWarning, SingularConfigurationError
 from ..model.bodies import check_parameter_values
 from ..model.symbols import name_indices
 from ..symbolic import matrices as catalogue
@@ -36,10 +36,14 @@ from .codegen.layouts import split_terms
 from .inverse import solve_inverse_dynamics
 from .parameters import ParameterValues
 from .results import ForwardDynamicsBatch, ForwardDynamicsResult, InverseDynamicsResult
-from .tolerances import RANK_RTOL, check_rank_rtol
+from .tolerances import RANK_RTOL, check_rank_rtol, matrix_rank
 
 if TYPE_CHECKING:
     from ..symbolic.equations import Equations
+
+#: What a state that is not finite is called, instead of a singular configuration (the compiled
+#: drivers' message too: :func:`kronlag.simulation.drivers.segment_status`).
+NOT_FINITE = "the state is not finite (the integration diverged before: not a singular configuration)"
 
 __all__ = ["NumericModel", "BATCH_MATRICES"]
 
@@ -314,10 +318,15 @@ class NumericModel:
         ------
         SingularConfigurationError
             M is not positive definite on the null space of ``[Phi_q; A]``.
+        NumericalError
+            ``q`` or ``qd`` is not finite (an integration that diverged, not a singular configuration).
         """
         parameters = self._parameters.vector(t) if self._constants is None else self._constants
         qdd, lam, mu, rank = self._forward(t, q, qd, parameters, alpha, beta)
         if rank < 0:
+            if not (np.isfinite(q).all() and np.isfinite(qd).all()):  # no configuration to judge
+                raise NumericalError(f"{NOT_FINITE} at t = {t!r}: q = {np.asarray(q).tolist()}, "
+                                     f"qd = {np.asarray(qd).tolist()}")
             raise SingularConfigurationError(q, qd, t)
         unique = rank == self.r + self.s
         if not unique and not self._warned_redundant:
@@ -494,6 +503,14 @@ class NumericModel:
         :func:`kronlag.numeric.assembly.assemble`."""
         return assemble(self, q_guess, fixed=fixed, qd_guess=qd_guess, qd_fixed=qd_fixed, tol=tol,
                         max_iterations=max_iterations, t=t)
+
+    def mobility(self, q, t: float = 0.0) -> int:
+        """The degrees of freedom at the (assembled) configuration ``q``: ``m`` minus the rank of
+        ``[Phi_q; A]`` there (the rank policy, :func:`~kronlag.numeric.tolerances.matrix_rank`), which
+        counts redundant constraints once; ``m - r - s`` only when every row is independent."""
+        q = self.state_vector(q)
+        terms = self.dynamics_terms(q, np.zeros(self.m), t)
+        return self.m - matrix_rank(np.vstack([terms["Phi_q"], terms["A"]]), self.rank_rtol)
 
     def __repr__(self) -> str:
         return (f"NumericModel({self.equations.system.name!r}, m={self.m}, r={self.r}, s={self.s}, "

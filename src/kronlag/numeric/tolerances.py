@@ -43,7 +43,7 @@ import numpy as np
 from ..core.errors import InputError
 
 __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
-           "STALL", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes", "singular_ratio", "c_macros"]
+           "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "integrator_tolerances", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes", "singular_ratio", "c_macros"]
 
 #: Default relative rank tolerance on ``[Phi_q; A]`` (see the module docstring).
 RANK_RTOL = 1e-8
@@ -62,6 +62,22 @@ MAX_PROJECTION_ITERATIONS = 8
 #: A Gauss-Newton step below ``STALL (1 + |q|)`` in every coordinate is at rounding level: ``Phi`` is as
 #: small as it gets, and the projection ends there.
 STALL = 1e-15
+#: The tightest ``rtol`` or ``atol`` handed to CVODE: about ``50 eps`` for states of size 1 (below
+#: it CVODE stops with "too much accuracy requested").
+CVODE_TIGHTEST = 1e-14
+#: The tightest ``rtol`` or ``atol`` handed to ALI3-P: its velocities ``2/h (q - q0) - v0`` carry the
+#: rounding of the positions' Newton iteration (``1e-13 (1 + |q|)``) amplified by ``2/h``, so a
+#: tighter tolerance only adds steps and makes the error larger (IFToMM A02: the error of B0 levels
+#: off at 1.5e-5 m with 3e-12, 4e-5 m with 1e-11, and grows again below 1e-12).
+INDEX3_TIGHTEST = 3e-12
+
+
+def integrator_tolerances(rtol: float, atol: float, scale: float, tightest: float) -> tuple[float, float]:
+    """The ``(rtol, atol)`` given to an integrator whose global error exceeds its local tolerance by
+    about ``scale``, for the requested ones: both divided by ``scale`` (their ratio, which says where
+    absolute accuracy takes over from relative, is kept), neither below ``tightest``, the integrator's
+    rounding floor (:data:`CVODE_TIGHTEST`, :data:`INDEX3_TIGHTEST`)."""
+    return max(rtol / scale, tightest), max(atol / scale, tightest)
 
 
 def check_rank_rtol(rank_rtol: float) -> float:

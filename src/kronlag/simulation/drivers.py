@@ -21,6 +21,7 @@ import numpy as np
 
 from ..core.errors import CompilerError, InputError
 from ..numeric import codegen
+from ..numeric.numeric_model import NOT_FINITE
 from ..numeric.tolerances import numerical_rank
 from .interface import DriverOptions, c_declarations, doubles
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
@@ -243,6 +244,8 @@ def segment_status(segment: Segment, model: NumericModel, kind: str) -> tuple[Re
     if result is Result.SOLVER_FAILED and spec.flag_names:
         name = getattr(driver(model, kind), spec.flag_names)(segment.flag).decode()
         reason = f"{spec.label} {name} ({segment.flag})"
+    if result is Result.SINGULAR and not np.isfinite(segment.y_end).all():
+        result, reason = Result.SOLVER_FAILED, NOT_FINITE
     message = f"Integration failed at t = {segment.t_end:.6g}, q = {np.array2string(q, precision=6)}: {reason}"
     return result, message + (f"; last passage: {segment.events[-1]}" if segment.events else "")
 

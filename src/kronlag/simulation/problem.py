@@ -11,13 +11,14 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 from ..core.errors import ProjectionError
 from ..numeric.projection import project_positions, project_velocities
+from ..numeric.tolerances import integrator_tolerances
 from .control import RunControl
 from .trajectory import Result, SingularPassage
 
@@ -163,6 +164,13 @@ class SolverOptions:
     def projection_tol(self) -> float:
         """Residual tolerance of the position projection: ``atol / 100``."""
         return self.atol / 100
+
+    def scaled(self, scale: float, tightest: float) -> SolverOptions:
+        """These options with ``rtol`` and ``atol`` both divided by ``scale``, neither below ``tightest``
+        (:func:`kronlag.numeric.tolerances.integrator_tolerances`): what an integrator whose global
+        error exceeds its local tolerance by about ``scale`` is given."""
+        rtol, atol = integrator_tolerances(self.rtol, self.atol, scale, tightest)
+        return replace(self, rtol=rtol, atol=atol)
 
 
 class Solver(ABC):

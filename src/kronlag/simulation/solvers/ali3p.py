@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...core.errors import SingularConfigurationError
+from ...numeric.tolerances import INDEX3_TIGHTEST
 from ..drivers import Segment, require, run, segment_status, solution_of
 from ..problem import MultibodyProblem, Solution, Solver, SolverOptions
 from .compiled import CompiledSolver
@@ -32,7 +33,8 @@ class Index3Solver(Solver):
     mechanisms with redundant constraints (IFToMM A04).  It does not detect a
     branch switch by itself: that it keeps the branch is checked by the tests
     (the cranks of A02 stay parallel from rtol 1e-2 to 1e-8).  The local error
-    ``h^2/12 (qdd_{n+1} - qdd_n)`` in ``q`` is kept below ``atol + rtol |q|``;
+    ``h^2/12 (qdd_{n+1} - qdd_n)`` in ``q`` is kept below ``atol + rtol |q|`` (both
+    scaled: :attr:`TOLERANCE_SCALE`);
     outputs at ``t_eval`` are interpolated (cubic Hermite).  Second order: for
     tight tolerances on long runs :class:`SwitchingSolver` is much faster.
     """
@@ -42,11 +44,13 @@ class Index3Solver(Solver):
     integrator = "trapezoidal rule with local error control, compiled"
     order = 2
     requirements = "the C backend, constant parameters, no nonholonomic constraints and a C compiler"
-    #: The driver's relative tolerance is the requested one divided by this (``atol`` is kept),
-    #: so that the global error at a given ``rtol`` is of the size the other methods give: the
-    #: local error of a second-order method accumulates over ~1e4 steps (IFToMM A02 at rtol
-    #: 1e-8: B0 within 1e-5 m for N = 2, 4, 8 with 3000; 1e-4 with 100).
-    TOLERANCE_SCALE = 3000.0
+    #: The driver's ``rtol`` and ``atol`` are the requested ones divided by this, neither below
+    #: :data:`~kronlag.numeric.tolerances.INDEX3_TIGHTEST`: the local error of a second-order
+    #: method accumulates over ~1e4 steps, and its error control bounds the positions only, while
+    #: the velocities' errors are what a later motion amplifies (IFToMM A02: with 3000 and ``atol``
+    #: kept, the switching method's error of B0 was 2 to 12 mm at rtol 1e-4 to 1e-8, atol 1e-6;
+    #: with 3e5 for both it is below 3e-4 m at rtol 1e-4 and 2e-5 m at rtol 1e-6 and tighter).
+    TOLERANCE_SCALE = 3e5
 
     @staticmethod
     def supports(model: NumericModel) -> bool:
@@ -74,5 +78,5 @@ def index3_segment(problem: MultibodyProblem, options: SolverOptions, t0: float,
         start = None
     a0 = np.zeros(m) if start is None else start.qdd
     lam0 = np.zeros(r) if start is None else start.lam
-    return run("index3", problem, options, t0, y0, a0=a0, lam0=lam0, handback=int(handback),
-               rtol=options.rtol / Index3Solver.TOLERANCE_SCALE)
+    scaled = options.scaled(Index3Solver.TOLERANCE_SCALE, INDEX3_TIGHTEST)
+    return run("index3", problem, scaled, t0, y0, a0=a0, lam0=lam0, handback=int(handback))

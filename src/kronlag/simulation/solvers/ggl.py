@@ -6,7 +6,7 @@ import numpy as np
 
 from ...core.errors import NumericalError
 from ...numeric.linalg import least_norm
-from ...numeric.tolerances import numerical_rank, rank_magnitudes
+from ...numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
 from ..problem import MultibodyProblem, Solution, Solver, SolverOptions
 from ..stepping import Stepper, march
 
@@ -21,34 +21,52 @@ class _IDAStepper(Stepper):
     """SUNDIALS IDA (scikit-sundae) on the GGL residual of :class:`GGLSolver`."""
 
     def __init__(self, problem: MultibodyProblem, options: SolverOptions):
+        self.problem, self.options, self.m = problem, options, problem.m
+        self.nfev = self.njev = 0
+        self._start(problem.t0, problem.y0)
+
+    def _start(self, t: float, y: np.ndarray) -> None:
+        """(Re)start IDA at the consistent state ``(t, y = [q, qd])``."""
         from sksundae.ida import IDA
 
-        self.problem = problem
+        problem, options = self.problem, self.options
         model, m, s = problem.model, problem.m, problem.model.s
-        self.m = m
-        # Redundant constraints would make the DAE's Jacobian singular: only the rows that are
-        # independent at the start (the rank policy, kronlag.tolerances) enter the residual.
-        magnitudes, rows = rank_magnitudes(model.Phi_q(problem.q0, problem.t0))
+        q, qd = y[:m], y[m:]
+        # Redundant constraints would make the DAE's Jacobian singular: only rows independent here
+        # (the rank policy, kronlag.tolerances) enter the residual; step() chooses them again where
+        # the motion makes them dependent while the whole set keeps its rank.
+        Phi_q = model.Phi_q(q, t)
+        magnitudes, rows = rank_magnitudes(Phi_q)
         self.rows = np.sort(rows[:numerical_rank(magnitudes, model.rank_rtol)])
         r = self.r = len(self.rows)
-        start = model.forward_dynamics(problem.q0, problem.qd0, problem.t0)
-        lam0 = least_norm(model.Phi_q(problem.q0, problem.t0)[self.rows].T,
-                          model.Phi_q(problem.q0, problem.t0).T @ start.lam, rank_rtol=model.rank_rtol)
-        y0 = np.concatenate([problem.q0, problem.qd0, lam0, start.mu, np.zeros(r)])
-        yp0 = np.concatenate([problem.qd0, start.qdd, np.zeros(2 * r + s)])
+        start = model.forward_dynamics(q, qd, t)
+        lam0 = least_norm(Phi_q[self.rows].T, Phi_q.T @ start.lam, rank_rtol=model.rank_rtol)
+        y0 = np.concatenate([q, qd, lam0, start.mu, np.zeros(r)])
+        yp0 = np.concatenate([qd, start.qdd, np.zeros(2 * r + s)])
         algebraic = np.arange(2 * m, 2 * m + 2 * r + s)
         # scikit-sundae does not expose IDASetSuppressAlg: a large absolute
         # tolerance gives the multipliers and eta a negligible weight, which
         # removes them from the local error test (their values follow from q, v).
         atol = np.full(y0.size, options.atol)
         atol[algebraic] = _ALGEBRAIC_ATOL
+        if hasattr(self, "solver"):
+            self.nfev, self.njev = self.counters()
         self.solver = IDA(self._residual, rtol=options.rtol, atol=atol, algebraic_idx=algebraic,
                           max_step=options.max_step if np.isfinite(options.max_step) else 0.0,
                           max_num_steps=options.max_steps + 1,
                           **({} if options.max_order is None else {"max_order": options.max_order}))
-        self.solver.init_step(problem.t0, y0, yp0)
-        self.t, self.y = problem.t0, problem.y0
-        self.nfev = self.njev = 0
+        self.solver.init_step(t, y0, yp0)
+        self.t, self.y = t, y
+        self.offsets = (self.nfev, self.njev)
+
+    def _rows_dependent(self) -> bool:
+        """The rows in the residual approach a rank loss (:data:`~kronlag.tolerances.APPROACH_RTOL`)
+        that the whole ``Phi_q`` does not have: another choice of rows is needed."""
+        model, r = self.problem.model, self.r
+        if r == model.r:
+            return False
+        Phi_q = model.Phi_q(self.y[:self.m], self.t)
+        return singular_ratio(Phi_q[self.rows], r)[0] < APPROACH_RTOL <= singular_ratio(Phi_q, r)[0]
 
     def _residual(self, t: float, x: np.ndarray, xp: np.ndarray, res: np.ndarray) -> None:
         """GGL residual: ``x = [q, v, lam, mu, eta]`` (2 m + 2 r + s,) over the independent rows."""
@@ -64,8 +82,10 @@ class _IDAStepper(Stepper):
         res[2 * m + 2 * r:] = A @ v + terms["b"]
 
     def step(self) -> str | None:
+        if self._rows_dependent():  # here, not at the end of the last step: its outputs need its solver
+            self._start(self.t, self.y)
         result = self.solver.step(self.problem.t1, method="onestep", tstop=self.problem.t1)
-        self.nfev, self.njev = result.nfev, result.njev
+        self.nfev, self.njev = self.offsets[0] + result.nfev, self.offsets[1] + result.njev
         if not result.success:
             return result.message
         self.t, self.y = float(result.t), result.y[:2 * self.m]
@@ -102,8 +122,9 @@ class GGLSolver(Solver):
     ``eta0 = 0`` and ``(qdd0, lam0, mu0)`` from ``model.forward_dynamics(q0, qd0, t0)``.
     With redundant constraints only the rows independent at the start enter
     (the rank policy of :mod:`kronlag.tolerances`), so that the Jacobian stays
-    regular; where the motion makes another set of rows dependent, IDA fails
-    (status -1).  The residual is evaluated in Python, so this is the slowest method (about
+    regular; where the motion makes the chosen rows dependent while the whole set
+    keeps its rank (:data:`~kronlag.tolerances.APPROACH_RTOL`; IFToMM A04 at t = 1.25 s),
+    IDA restarts from the current state with rows chosen there.  The residual is evaluated in Python, so this is the slowest method (about
     0.15 s per simulated second of the four-bar at rtol 1e-8).
     """
 
