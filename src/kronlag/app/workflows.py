@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
-from ..core.errors import ModelError
+from ..core.errors import AssemblyError, ModelError
 from ..core.kernels import ExpressionFunction
 from ..model.expressions import parse_expression
 from ..model.modelfile import ModelFile, PrescribedMotion
@@ -69,6 +69,11 @@ class ModelCheck:
         Numeric ranks at the initial guess (``None`` when values are missing).
     constraint_residual : float or None
         ``max |Phi(q)|`` at the initial guess.
+    assembly_correction : tuple of (float, float) or None
+        ``max |q0 - q_guess|`` and ``max |qd0 - qd_guess|`` of the assembled initial state
+        (:func:`initial_state`); ``None`` when it was not tried (values missing) or failed.
+    assembly_error : str
+        Why the initial state cannot be assembled (the unsatisfied constraint rows); empty if it can.
     """
 
     name: str
@@ -80,6 +85,8 @@ class ModelCheck:
     rank_Phi_q: int | None
     rank_A: int | None
     constraint_residual: float | None
+    assembly_correction: tuple[float, float] | None = None
+    assembly_error: str = ""
 
     def report(self) -> str:
         """A few lines of text for people."""
@@ -96,6 +103,11 @@ class ModelCheck:
                 lines.append(f"rank of {label} at the initial guess: {rank} of {rows} ({verdict})")
         if self.r:
             lines.append(f"max |Phi(q)| at the initial guess: {self.constraint_residual:.3g}")
+        if self.assembly_error:
+            lines.append(f"initial state: NOT ASSEMBLED: {self.assembly_error}")
+        elif self.assembly_correction is not None:
+            lines.append("initial state assembled: max |q0 - guess| = {:.3g}, max |qd0 - guess| = {:.3g}"
+                         .format(*self.assembly_correction))
         return "\n".join(lines)
 
 
@@ -121,8 +133,20 @@ def check_model(model: ModelFile, *, equations: Equations | None = None) -> Mode
         at_guess = evaluate(0.0, q, qd, [values[p.name] for p in eom.parameters])
         rank_phi, rank_a = (matrix_rank(at_guess[name]) for name in ("Phi_q", "A"))  # no model yet: default rtol
         residual = float(np.max(np.abs(at_guess["Phi"]), initial=0.0))
+    correction, failure = _assembly(model, eom) if not missing else (None, "")
     return ModelCheck(name=system.name, m=m, r=r, s=s, degrees_of_freedom=m - r - s, missing_values=missing,
-                      rank_Phi_q=rank_phi, rank_A=rank_a, constraint_residual=residual)
+                      rank_Phi_q=rank_phi, rank_A=rank_a, constraint_residual=residual,
+                      assembly_correction=correction, assembly_error=failure)
+
+
+def _assembly(model: ModelFile, equations: Equations) -> tuple[tuple[float, float] | None, str]:
+    """``((max |dq|, max |dqd|), "")`` of assembling the file's initial state, or ``(None, why not)``."""
+    q, qd = (np.asarray(x, dtype=float) for x in model.guess_vectors())
+    try:
+        q0, qd0 = initial_state(model, numeric_model(model, equations=equations))
+    except AssemblyError as error:
+        return None, str(error)
+    return (float(np.max(np.abs(q0 - q), initial=0.0)), float(np.max(np.abs(qd0 - qd), initial=0.0))), ""
 
 
 # -- numeric set-up -------------------------------------------------------------------

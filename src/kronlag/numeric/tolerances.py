@@ -34,6 +34,12 @@ threshold at rounding level (``1e-10`` and below) declares such states full
 rank and the accelerations blow up (IFToMM A04).  A threshold far above the
 drift but far below the smallest singular value of a regular mechanism keeps
 both right; pass ``rank_rtol`` to ``eom.numeric`` for badly scaled models.
+
+The vibration modes of a linearization (:class:`~kronlag.studies.linearization.LinearModel`) solve
+``K_r phi = w^2 M_r phi``; an eigenvalue ``w^2`` with ``|w^2| <= ZERO_EIGENVALUE_RTOL`` times the
+problem's scale (the largest ``|w^2|``, or ``max |K| / max |M|`` of the unreduced matrices if larger)
+is zero within rounding (:func:`zero_eigenvalue_threshold`): a neutral mode (a free spin, 0 rad/s), not an
+unstable one.
 """
 
 from __future__ import annotations
@@ -43,7 +49,7 @@ import numpy as np
 from ..core.errors import InputError
 
 __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
-           "STALL", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes", "singular_ratio", "c_macros"]
+           "STALL", "ZERO_EIGENVALUE_RTOL", "zero_eigenvalue_threshold", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes", "singular_ratio", "c_macros"]
 
 #: Default relative rank tolerance on ``[Phi_q; A]`` (see the module docstring).
 RANK_RTOL = 1e-8
@@ -62,6 +68,9 @@ MAX_PROJECTION_ITERATIONS = 8
 #: A Gauss-Newton step below ``STALL (1 + |q|)`` in every coordinate is at rounding level: ``Phi`` is as
 #: small as it gets, and the projection ends there.
 STALL = 1e-15
+#: An eigenvalue ``w^2`` of a linearization at most this fraction of the problem's scale is zero
+#: within rounding (see the module docstring); rounding leaves ~1e-15 of it, a true mode far more.
+ZERO_EIGENVALUE_RTOL = 1e-9
 
 
 def check_rank_rtol(rank_rtol: float) -> float:
@@ -78,6 +87,14 @@ def numerical_rank(magnitudes: np.ndarray, rank_rtol: float) -> int:
     if magnitudes.size == 0 or not magnitudes.max() > 0.0:
         return 0
     return int(np.count_nonzero(magnitudes > rank_rtol * magnitudes.max()))
+
+
+def zero_eigenvalue_threshold(values: np.ndarray, scale: float = 0.0) -> float:
+    """The largest ``|w^2|`` that is zero within rounding among the eigenvalues ``values``:
+    ``ZERO_EIGENVALUE_RTOL * max(scale, max |w^2|)`` (``scale``: ``max |K| / max |M|`` of the
+    unreduced matrices)."""
+    largest = float(np.max(np.abs(np.asarray(values, dtype=float)), initial=0.0))
+    return ZERO_EIGENVALUE_RTOL * max(float(scale), largest)
 
 
 def matrix_rank(matrix: np.ndarray, rank_rtol: float = RANK_RTOL) -> int:
