@@ -8,7 +8,7 @@ dynamics along prescribed motions.  The command-line interface is a thin shell o
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -332,10 +332,7 @@ def parse_drive(text: str, model: ModelFile) -> tuple[str, PrescribedMotion]:
 def driven_model(model: ModelFile, drives: Mapping[str, PrescribedMotion]) -> NumericModel:
     """The numeric model of ``model`` with ``drives`` (by name) added as rheonomic constraints
     (:meth:`kronlag.System.add_drive`)."""
-    system = copy.deepcopy(model.system)
-    for name, drive in drives.items():
-        system.add_drive(drive.target, drive.motion, name=name)
-    return derive(system).numeric(model.numeric_values())
+    return derive(dataclasses.replace(model, drives=dict(drives)).driven().system).numeric(model.numeric_values())
 
 
 def kinematics_along(model: ModelFile, drives: Mapping[str, PrescribedMotion],

@@ -30,13 +30,13 @@ from ..core.errors import InputError
 from ..model.joints import Joint
 
 __all__ = ["Reaction", "joint_reaction", "reaction_columns", "REACTION_UNITS", "column_unit", "multiplier_units",
-           "multiplier_labels"]
+           "multiplier_labels", "GENERALIZED_FORCE_UNITS"]
 
 #: SI units of a reaction's force and couple components.
 REACTION_UNITS = {"force": "N", "couple": "N*m"}
 
 #: The unit of a generalized force on a coordinate of the unit given (a drive's multiplier).
-_GENERALIZED_FORCE_UNITS = {"rad": REACTION_UNITS["couple"], "m": REACTION_UNITS["force"]}
+GENERALIZED_FORCE_UNITS = {"rad": REACTION_UNITS["couple"], "m": REACTION_UNITS["force"]}
 
 _FRAMES = ("world", "body")
 
@@ -155,14 +155,14 @@ def multiplier_units(system, coordinate_units: dict[str, str] | None = None) -> 
     for constraint in system.constraints:
         if constraint.name in system.drives and coordinate_units:
             driven = [name for q, name in coordinates.items() if sp.diff(constraint.expression, q) == 1]
-            unit = _GENERALIZED_FORCE_UNITS.get(coordinate_units.get(driven[0], "")) if len(driven) == 1 else None
+            unit = GENERALIZED_FORCE_UNITS.get(coordinate_units.get(driven[0], "")) if len(driven) == 1 else None
             if unit:
                 units[constraint.name] = unit
     return units
 
 
-def multiplier_labels(system, coordinate_units: dict[str, str] | None = None) -> list[str]:
+def multiplier_labels(system, coordinate_units: dict[str, str] | None = None, *, with_units: bool = True) -> list[str]:
     """A label per holonomic multiplier: ``lambda[<constraint name>]``, with ``(<unit>)`` where
-    :func:`multiplier_units` knows it."""
-    units = multiplier_units(system, coordinate_units)
+    :func:`multiplier_units` knows it (and ``with_units``)."""
+    units = multiplier_units(system, coordinate_units) if with_units else {}
     return [f"lambda[{c.name}]" + (f" ({units[c.name]})" if c.name in units else "") for c in system.constraints]
