@@ -48,7 +48,7 @@ def test_panels_are_titled_labelled_and_not_empty(four_bar):
     panels = dict(zip(CONSTRAINED_PANELS, figure.axes))
     assert _legend_labels(panels["Coordinates"]) == ["$q_{1}$", "$q_{2}$", "$q_{3}$"]
     assert _legend_labels(panels["Velocities"]) == [r"$\dot{q}_{1}$", r"$\dot{q}_{2}$", r"$\dot{q}_{3}$"]
-    assert _legend_labels(panels["Lagrange multipliers"]) == [r"$\lambda_{1}$", r"$\lambda_{2}$"]
+    assert _legend_labels(panels["Lagrange multipliers"]) == ["lambda[loop x]", "lambda[loop y]"]
     assert panels["Constraint drift"].get_yscale() == "log"
     for axes in figure.axes:
         assert axes.lines and axes.get_ylabel()

@@ -25,6 +25,7 @@ from .core.errors import (  # noqa: E402
     ActuationWarning,
     AssemblyError,
     CompilerError,
+    DrivesNotAppliedWarning,
     EquilibriumError,
     InitialStateWarning,
     InputError,
@@ -116,5 +117,6 @@ __all__ = [
     "CompilerError",
     "RedundantConstraintsWarning",
     "ActuationWarning",
+    "DrivesNotAppliedWarning",
     "InitialStateWarning",
 ]

@@ -13,7 +13,11 @@ import numpy as np
 
 from ..core.errors import ModelError
 from ..model.builtin import resolve_model
+from ..numeric.reactions import column_unit, multiplier_labels, reaction_columns
+from ..numeric.tolerances import ZERO_EIGENVALUE_RTOL
+from ..studies.linearization import LinearModel
 from ..studies.sweeps import sweep
+from .commands import method_help
 from .outputs import IncompleteRun
 from .workflows import numeric_model
 
@@ -51,22 +55,37 @@ def _equilibrium(arguments: argparse.Namespace) -> None:
           f"{rest.iterations} Newton iterations)")
     for name, value in zip(names, rest.q):
         print(f"  {name:<12} = {value: .10g}{'  (held)' if name in fixed else ''}")
-    for j, value in enumerate(rest.lam):
-        print(f"  lambda{j + 1:<6} = {value: .10g}")
+    system = numeric.equations.system
+    joint_rows = {row for joint in system.joints for row in joint.constraint_names}
+    for label, constraint, value in zip(multiplier_labels(system), system.constraints, rest.lam):
+        if constraint.name not in joint_rows:
+            print(f"  {label:<12} = {value: .10g}")
+    for name, value in reaction_columns(numeric, [rest.t], rest.q[None, :], rest.lam[None, :]).items():
+        print(f"  {name:<12} = {value[0]: .10g} {column_unit(name)}")
     for name, value in rest.holding_forces.items():
         print(f"  force holding {name} = {value: .10g}")
     if arguments.animate_mode and Path(arguments.animate_mode).suffix not in (".gif", ".mp4", ".html", ".htm"):
         raise ModelError(f"--animate-mode {arguments.animate_mode}: the file name must end in .gif, .mp4 or .html")
     if arguments.modes or arguments.animate_mode:
         linear = numeric.linearize(rest.q)
-        print(f"linearized in {', '.join(linear.coordinates)}: natural frequencies (rad/s, nan: unstable)")
-        for k, frequency in enumerate(linear.natural_frequencies):
-            shape = ", ".join(f"{value:.4g}" for value in linear.mode_shapes[:, k])
-            print(f"  mode {k}: {frequency:.8g} rad/s = {frequency / (2 * np.pi):.6g} Hz   shape ({shape})")
+        print(modes_report(linear))
         if arguments.animate_mode:
             if not 0 <= arguments.mode < len(linear.coordinates):
                 raise ModelError(f"--mode {arguments.mode}: the model has modes 0 to {len(linear.coordinates) - 1}")
             print(f"wrote {linear.animate_mode(arguments.mode, arguments.animate_mode)}")
+
+
+def modes_report(linear: LinearModel) -> str:
+    """The natural frequencies and mode shapes of ``linear``, a mode a line, its shape by coordinate
+    name; a mode whose ``w^2`` is zero within rounding (:attr:`LinearModel.neutral`) prints as 0."""
+    lines = [f"linearized in {', '.join(linear.coordinates)}: natural frequencies (rad/s; 0: neutral, "
+             f"|w^2| <= {linear.neutral_threshold:.3g} rad^2/s^2 ({ZERO_EIGENVALUE_RTOL:g} of the scale), zero "
+             "within rounding; nan: unstable, w^2 < 0)"]
+    for k, (frequency, neutral) in enumerate(zip(linear.natural_frequencies, linear.neutral)):
+        shape = ", ".join(f"{name} {value:.4g}" for name, value in linear.mode_shape(k).items())
+        kind = "  (neutral)" if neutral else "  (unstable)" if np.isnan(frequency) else ""
+        lines.append(f"  mode {k}: {frequency:.8g} rad/s = {frequency / (2 * np.pi):.6g} Hz{kind}   shape: {shape}")
+    return "\n".join(lines)
 
 
 def _axis(text: str) -> tuple[str, np.ndarray]:
@@ -132,7 +151,7 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
                      help="values of a parameter, coordinate (q1) or speed (q1d): evenly spaced, or "
                           "NAME=V1,V2,...; repeat for a grid of all combinations")
     sub.add_argument("--t-end", type=float, help="final time (default: the model's [simulation] t_end)")
-    sub.add_argument("--method", help="integration method (default: the model's)")
+    sub.add_argument("--method", help=method_help())
     sub.add_argument("--points", type=int, default=101, help="output times per case (default: 101)")
     sub.add_argument("--workers", type=int, default=2,
                      help="processes of the local Dask cluster; 0: run in this process (default: 2)")

@@ -20,14 +20,18 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
+import textwrap
 from collections.abc import Callable, Sequence
 
+from .. import __version__
 from ..core.errors import CompilerError, InputError, NumericalError
 from . import analysis_commands, commands
 from .outputs import IncompleteRun, RunInterrupted
 
-__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_INCOMPLETE", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "EXIT_CODES"]
+__all__ = ["main", "build_parser", "plain_text", "EXIT_OK", "EXIT_INCOMPLETE", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED",
+           "EXIT_CODES"]
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT = 0, 1, 2
 #: Ctrl-C (SIGINT), as shells report a command it ended: 128 + 2.
@@ -44,10 +48,30 @@ EXIT_CODES: tuple[tuple[type[BaseException], int, str], ...] = (
 )
 
 
+#: A reST cross-reference, ``:role:`target``` or ``:role:`~dotted.target```, and inline literals.
+_REFERENCE = re.compile(r":[a-z]+:`(~?)([^`<]*?)(?:\s*<([^`>]*)>)?`")
+_LITERAL = re.compile(r"``([^`]*)``")
+
+
+def plain_text(text: str) -> str:
+    """Docstring text (reST) as plain text for ``--help``: ``:func:`~a.b.c``` -> ``c``,
+    ``:mod:`a.b``` -> ``a.b``, a double-backquoted literal -> its text; paragraphs refilled."""
+
+    def reference(match: re.Match) -> str:
+        short, title, target = match.groups()
+        if target is not None:  # :role:`title <target>`
+            return title.strip()
+        return title.rpartition(".")[2] if short else title
+
+    plain = _LITERAL.sub(r"\1", _REFERENCE.sub(reference, text))
+    return "\n\n".join(textwrap.fill(" ".join(paragraph.split()), 79) for paragraph in plain.strip().split("\n\n"))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``kronlag`` argument parser."""
-    parser = argparse.ArgumentParser(prog="kronlag", description=__doc__,
+    parser = argparse.ArgumentParser(prog="kronlag", description=plain_text(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"kronlag {__version__}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def command(name: str, handler: Callable[[argparse.Namespace], None], summary: str,

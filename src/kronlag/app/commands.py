@@ -15,8 +15,9 @@ import numpy as np
 
 from ..core.errors import ModelError
 from ..model.builtin import BUILTIN_MODELS, example_names, example_path, resolve_model
-from ..model.modelfile import ModelFile, load_model
+from ..model.modelfile import ModelFile, SimulationSettings, load_model
 from ..simulation import METHODS
+from ..simulation.solvers import AUTO_PREFERENCE
 from ..symbolic.derivation import derive
 from ..symbolic.export import FORMATS, LANGUAGES, export_code, file_stem, format_equations
 from ..views.animation import SUPPORTED_FORMATS, check_animation_target, playing_speed
@@ -32,7 +33,7 @@ from .workflows import (
     summarize,
 )
 
-__all__ = ["add_commands", "ProgressBar", "positive", "count"]
+__all__ = ["add_commands", "ProgressBar", "positive", "count", "method_help"]
 
 
 #: Default output grid of ``simulate``: a point every _GRID_SPACING of simulated time, within
@@ -159,8 +160,12 @@ def _export(arguments: argparse.Namespace) -> None:
 
 def _check(arguments: argparse.Namespace) -> None:
     model = resolve_model(arguments.model)
+    check = check_model(model)
+    if check.assembly_error:  # bad input: the file's [initial] state is not a state of the mechanism
+        print(check.report())
+        raise ModelError(f"{model.source}: [initial]: the initial state cannot be assembled: {check.assembly_error}")
     print(f"{model.source}: valid model file")
-    print(check_model(model).report())
+    print(check.report())
 
 
 class ProgressBar:
@@ -283,6 +288,14 @@ def count(text: str) -> int:
     return int(text)
 
 
+def method_help() -> str:
+    """Help of ``--method``: every method of the solver registry, and the default marked."""
+    default = SimulationSettings().method
+    listed = ", ".join(f"{name} (the default)" if name == default else name for name in ("auto", *METHODS))
+    return (f"integration method: {listed}; the default is the model file's [simulation] method when it gives "
+            f"one; auto picks the first of {', '.join(AUTO_PREFERENCE)} that supports the model")
+
+
 def _add_grid_options(sub: argparse.ArgumentParser, default: str) -> None:
     """``--dt`` or ``--points``: the output times."""
     grid = sub.add_mutually_exclusive_group()
@@ -308,7 +321,7 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
 
     sub = command("simulate", _simulate, "assemble the initial state and integrate the equations of motion")
     sub.add_argument("--t-end", type=positive, help="final time (default: the model's [simulation] t_end)")
-    sub.add_argument("--method", help="integration method: " + ", ".join(("auto", *METHODS)) + " (default: the model's)")
+    sub.add_argument("--method", help=method_help())
     sub.add_argument("--rtol", type=positive, help="relative tolerance")
     sub.add_argument("--atol", type=positive, help="absolute tolerance")
     sub.add_argument("--max-steps", type=count, metavar="N", help="stop after N integrator steps "

@@ -8,7 +8,7 @@ dynamics along prescribed motions.  The command-line interface is a thin shell o
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -73,6 +73,11 @@ class ModelCheck:
         Numeric ranks at the initial guess (``None`` when values are missing).
     constraint_residual : float or None
         ``max |Phi(q)|`` at the initial guess.
+    assembly_correction : tuple of (float, float) or None
+        ``max |q0 - q_guess|`` and ``max |qd0 - qd_guess|`` of the assembled initial state
+        (:func:`initial_state`); ``None`` when it was not tried (values missing) or failed.
+    assembly_error : str
+        Why the initial state cannot be assembled (the unsatisfied constraint rows); empty if it can.
     """
 
     name: str
@@ -85,6 +90,8 @@ class ModelCheck:
     rank_Phi_q: int | None
     rank_A: int | None
     constraint_residual: float | None
+    assembly_correction: tuple[float, float] | None = None
+    assembly_error: str = ""
 
     def report(self) -> str:
         """A few lines of text for people."""
@@ -101,6 +108,11 @@ class ModelCheck:
                 lines.append(f"rank of {label} at the initial guess: {rank} of {rows} ({verdict})")
         if self.r:
             lines.append(f"max |Phi(q)| at the initial guess: {self.constraint_residual:.3g}")
+        if self.assembly_error:
+            lines.append(f"initial state: NOT ASSEMBLED: {self.assembly_error}")
+        elif self.assembly_correction is not None:
+            lines.append("initial state assembled: max |q0 - guess| = {:.3g}, max |qd0 - guess| = {:.3g}"
+                         .format(*self.assembly_correction))
         return "\n".join(lines)
 
     def _freedom_line(self) -> str:
@@ -139,16 +151,21 @@ def check_model(model: ModelFile, *, equations: Equations | None = None) -> Mode
         at_guess = evaluate(0.0, q, qd, [values[p.name] for p in eom.parameters])
         rank_phi, rank_a = (matrix_rank(at_guess[name]) for name in ("Phi_q", "A"))  # no model yet: default rtol
         residual = float(np.max(np.abs(at_guess["Phi"]), initial=0.0))
-    freedom, at = m - r - s, _NAIVE
-    if not missing and r + s:
+    freedom, at, correction, failure = m - r - s, _NAIVE, None, ""
+    if not missing:
+        numeric = numeric_model(model, equations=eom)
+        q, qd = (np.asarray(x, dtype=float) for x in model.guess_vectors())
         try:
-            numeric = numeric_model(model, equations=eom)
-            freedom, at = numeric.mobility(initial_state(model, numeric)[0]), "the assembled state"
-        except NumericalError:  # not assembled: the rank at a state off the constraints means nothing
-            pass
+            q0, qd0 = initial_state(model, numeric)
+        except NumericalError as error:  # not assembled: the rank at a state off the constraints means nothing
+            failure = str(error)
+        else:
+            correction = (float(np.max(np.abs(q0 - q), initial=0.0)), float(np.max(np.abs(qd0 - qd), initial=0.0)))
+            if r + s:
+                freedom, at = numeric.mobility(q0), "the assembled state"
     return ModelCheck(name=system.name, m=m, r=r, s=s, degrees_of_freedom=freedom, mobility_at=at,
-                      missing_values=missing,
-                      rank_Phi_q=rank_phi, rank_A=rank_a, constraint_residual=residual)
+                      missing_values=missing, rank_Phi_q=rank_phi, rank_A=rank_a, constraint_residual=residual,
+                      assembly_correction=correction, assembly_error=failure)
 
 
 # -- numeric set-up -------------------------------------------------------------------
@@ -334,10 +351,7 @@ def parse_drive(text: str, model: ModelFile) -> tuple[str, PrescribedMotion]:
 def driven_model(model: ModelFile, drives: Mapping[str, PrescribedMotion]) -> NumericModel:
     """The numeric model of ``model`` with ``drives`` (by name) added as rheonomic constraints
     (:meth:`kronlag.System.add_drive`)."""
-    system = copy.deepcopy(model.system)
-    for name, drive in drives.items():
-        system.add_drive(drive.target, drive.motion, name=name)
-    return derive(system).numeric(model.numeric_values())
+    return derive(dataclasses.replace(model, drives=dict(drives)).driven().system).numeric(model.numeric_values())
 
 
 def kinematics_along(model: ModelFile, drives: Mapping[str, PrescribedMotion],

@@ -39,6 +39,7 @@ __all__ = [
     "RedundantConstraintsWarning",
     "ActuationWarning",
     "InitialStateWarning",
+    "DrivesNotAppliedWarning",
 ]
 
 
@@ -111,3 +112,7 @@ class ActuationWarning(KronlagWarning):
 
 class InitialStateWarning(KronlagWarning):
     """The initial state violated the constraints and was projected onto them."""
+
+
+class DrivesNotAppliedWarning(KronlagWarning):
+    """A model file's ``[[drives]]`` were read but not added to its system (``ModelFile.driven()`` does)."""

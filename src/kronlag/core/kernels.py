@@ -105,6 +105,19 @@ def literal(value: float) -> str:
     return f"({text})" if value < 0 else text
 
 
+#: Functions written as :class:`sympy.Piecewise` before conversion: their derivatives are then
+#: piecewise too (SymEngine leaves those of ``Min``/``Max`` unevaluated) and one form reaches the
+#: code.  ``Heaviside(x)`` takes SymPy's value at 0, ``1/2`` unless given (``Heaviside(x, 1)``).
+PIECEWISE_FUNCTIONS = (sp.Min, sp.Max, sp.Heaviside)
+
+
+def piecewise_form(expr: sp.Basic) -> sp.Basic:
+    """``expr`` with every ``Min``, ``Max`` and ``Heaviside`` rewritten as a ``Piecewise``."""
+    if not expr.has(*PIECEWISE_FUNCTIONS):
+        return expr
+    return expr.replace(lambda node: isinstance(node, PIECEWISE_FUNCTIONS), lambda node: node.rewrite(sp.Piecewise))
+
+
 class ExpressionConverter:
     """SymPy -> SymEngine, memoized, with the inputs renamed (``renames``: e.g. ``q1`` -> ``q[0]``).
 
@@ -126,11 +139,13 @@ class ExpressionConverter:
     def __call__(self, expr: sp.Basic) -> se.Basic:
         result = self.memo.get(expr)
         if result is None:
-            result = self._build(expr)
+            result = self._build(piecewise_form(expr))
             self.memo[expr] = result
         return result
 
     def _build(self, expr: sp.Basic) -> se.Basic:
+        if isinstance(expr, sp.Piecewise):  # its arguments are (value, condition) pairs
+            return se.Piecewise(*[(self(value), self(condition)) for value, condition in expr.args])
         if expr.is_Number or expr in (sp.I, sp.zoo):
             return self._number(expr)
         if isinstance(expr, sp.Symbol):
@@ -192,6 +207,20 @@ def _minimum(*values):
     return functools.reduce(np.minimum, values)
 
 
+def _piecewise(*pairs):
+    """``Piecewise((value, condition), ...)`` on floats: the value of the first true condition."""
+    return next(value for value, condition in pairs if condition)
+
+
+def _piecewise_arrays(*pairs):
+    """``Piecewise((value, condition), ...)`` on arrays, element by element."""
+    values = [np.asarray(value, dtype=float) for value, _ in pairs]
+    conditions = [np.asarray(condition, dtype=bool) for _, condition in pairs]
+    shape = np.broadcast_shapes(*(array.shape for array in values + conditions))
+    return np.select([np.broadcast_to(c, shape) for c in conditions], [np.broadcast_to(v, shape) for v in values],
+                     np.nan)
+
+
 #: The generated Python source runs in one of two namespaces: :mod:`math` on floats (one
 #: state: fastest in pure Python), or NumPy on arrays (many states at once, vectorised).
 _FUNCTION_NAMES = ("sin", "cos", "tan", "sinh", "cosh", "tanh", "exp", "log", "sqrt", "floor", "pi", "e")
@@ -199,11 +228,14 @@ SCALAR_NAMESPACE: dict[str, object] = {name: getattr(math, name) for name in _FU
 SCALAR_NAMESPACE.update({name: getattr(math, name) for name in ("asin", "acos", "atan", "atan2", "asinh",
                                                                  "acosh", "atanh")},
                          E=math.e, ceiling=math.ceil, abs=abs, max=max, min=min,
-                         sign=lambda x: math.copysign(1.0, x) if x else 0.0)
+                         sign=lambda x: math.copysign(1.0, x) if x else 0.0, Piecewise=_piecewise,
+                         And=lambda *conditions: all(conditions), Or=lambda *conditions: any(conditions))
 ARRAY_NAMESPACE: dict[str, object] = {name: getattr(np, name) for name in _FUNCTION_NAMES}
 ARRAY_NAMESPACE.update(asin=np.arcsin, acos=np.arccos, atan=np.arctan, atan2=np.arctan2, asinh=np.arcsinh,
                         acosh=np.arccosh, atanh=np.arctanh, E=np.e, ceiling=np.ceil, abs=np.abs,
-                        max=_maximum, min=_minimum, sign=np.sign)
+                        max=_maximum, min=_minimum, sign=np.sign, Piecewise=_piecewise_arrays,
+                        And=lambda *conditions: functools.reduce(np.logical_and, conditions),
+                        Or=lambda *conditions: functools.reduce(np.logical_or, conditions))
 
 
 def python_source(kernel: Kernel, arguments: Sequence[str] = ("t", "q", "qd", "p")) -> str:

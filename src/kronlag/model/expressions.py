@@ -51,6 +51,7 @@ FUNCTIONS: dict[str, tuple[type[sp.Function] | type[sp.Basic], int]] = {
     "asin": (sp.asin, 1), "acos": (sp.acos, 1), "atan": (sp.atan, 1), "atan2": (sp.atan2, 2),
     "sinh": (sp.sinh, 1), "cosh": (sp.cosh, 1), "tanh": (sp.tanh, 1),
     "sqrt": (sp.sqrt, 1), "exp": (sp.exp, 1), "log": (sp.log, 1), "abs": (sp.Abs, 1),
+    "min": (sp.Min, 2), "max": (sp.Max, 2), "heaviside": (sp.Heaviside, 1),  # heaviside(0) = 1/2
 }
 
 #: Named constants.

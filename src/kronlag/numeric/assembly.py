@@ -54,7 +54,8 @@ def assemble(model: NumericModel, q_guess, *, fixed: Mapping | None = None, qd_g
     q, residual = positions.q, positions.residual
     if residual > tol:
         raise AssemblyError(f"cannot assemble {model.equations.system.name} near the guess with "
-                            f"{dict(fixed or {})} held: max |Phi| = {residual:.3g} > tol = {tol:g}", residual)
+                            f"{dict(fixed or {})} held: max |Phi| = {residual:.3g} > tol = {tol:g}; "
+                            f"{_unsatisfied(model, positions.terms['Phi'], tol)}", residual)
     qd = np.zeros(model.m) if qd_guess is None else model.state_vector(qd_guess, "qd_guess").copy()
     held = held_values(model, qd_fixed, qd)
     qd = project_velocities(model, q, qd, t, free=[i for i in range(model.m) if i not in held],
@@ -67,6 +68,14 @@ def assemble(model: NumericModel, q_guess, *, fixed: Mapping | None = None, qd_g
             raise AssemblyError(f"no speeds with {dict(qd_fixed or {})} held satisfy the velocity "
                                 f"constraints: max |[Phi_q qd + Phi_t; A qd + b]| = {violation:.3g}", violation)
     return q, qd
+
+
+def _unsatisfied(model: NumericModel, Phi: np.ndarray, tol: float) -> str:
+    """The constraint rows ``|Phi_j| > tol`` where the assembly ended, by name, largest first."""
+    values = np.abs(np.ravel(Phi))
+    rows = sorted(np.flatnonzero(values > tol), key=lambda j: -values[j])
+    names = [constraint.name for constraint in model.equations.system.constraints]
+    return "unsatisfied: " + ", ".join(f"{names[j]!r} (|Phi| = {values[j]:.3g})" for j in rows)
 
 
 def held_values(model: NumericModel, values: Mapping | None, target: np.ndarray) -> set[int]:

@@ -12,6 +12,11 @@ about ``P_B``).  Body A feels ``-F`` at ``P_B`` and ``-T``.  Components are
 in the world frame, or in B's body frame (``R_B^T F``, ``R_B^T T``) with
 ``frame="body"``.  Planar systems have ``F = (Fx, Fy)`` and ``T = (Mz,)``,
 spatial ones ``F = (Fx, Fy, Fz)`` and ``T = (Mx, My, Mz)``.
+
+Units (:data:`REACTION_UNITS`, for a model in SI units as every model file is): a force
+component is in ``N``, a couple's in ``N*m``; the multiplier of a joint row is in ``N`` when the
+row is a distance (its column of ``W`` has a force) and in ``N*m`` when it is an angle or an
+alignment of axes (only a couple), :func:`multiplier_units`.
 """
 
 from __future__ import annotations
@@ -24,7 +29,14 @@ import sympy as sp
 from ..core.errors import InputError
 from ..model.joints import Joint
 
-__all__ = ["Reaction", "joint_reaction", "reaction_columns"]
+__all__ = ["Reaction", "joint_reaction", "reaction_columns", "REACTION_UNITS", "column_unit", "multiplier_units",
+           "multiplier_labels", "GENERALIZED_FORCE_UNITS"]
+
+#: SI units of a reaction's force and couple components.
+REACTION_UNITS = {"force": "N", "couple": "N*m"}
+
+#: The unit of a generalized force on a coordinate of the unit given (a drive's multiplier).
+GENERALIZED_FORCE_UNITS = {"rad": REACTION_UNITS["couple"], "m": REACTION_UNITS["force"]}
 
 _FRAMES = ("world", "body")
 
@@ -118,3 +130,39 @@ def reaction_columns(model, t, q, lam) -> dict[str, np.ndarray]:
         columns.update({f"{joint.name}.F{axis}": reaction.force[:, i] for i, axis in enumerate(force_names)})
         columns.update({f"{joint.name}.M{axis}": reaction.torque[:, i] for i, axis in enumerate(torque_names)})
     return columns
+
+
+def column_unit(column: str) -> str:
+    """The unit of a reaction column of :func:`reaction_columns`: ``REACTION_UNITS["force"]`` for
+    ``<joint>.F<axis>``, ``REACTION_UNITS["couple"]`` for ``<joint>.M<axis>``."""
+    return REACTION_UNITS["force" if column.rpartition(".")[2].startswith("F") else "couple"]
+
+
+def multiplier_units(system, coordinate_units: dict[str, str] | None = None) -> dict[str, str]:
+    """The unit of each multiplier whose unit is known, by constraint name.
+
+    A joint row's multiplier is in ``N`` when the row's column of the joint's wrench map ``W`` has
+    a force component (the row is a distance) and in ``N*m`` when it has only a couple (an angle,
+    or an alignment of axes).  A drive of a coordinate whose unit ``coordinate_units`` gives
+    (``rad`` or ``m``) has the generalized force on it, ``N*m`` or ``N``.  Other rows are left out.
+    """
+    units: dict[str, str] = {}
+    for joint in system.joints:
+        for k, row in enumerate(joint.constraint_names):
+            has_force = any(entry != 0 for entry in joint.wrench[:joint.dimension, k])
+            units[row] = REACTION_UNITS["force" if has_force else "couple"]
+    coordinates = {q: q.name for q in system.coordinates}
+    for constraint in system.constraints:
+        if constraint.name in system.drives and coordinate_units:
+            driven = [name for q, name in coordinates.items() if sp.diff(constraint.expression, q) == 1]
+            unit = GENERALIZED_FORCE_UNITS.get(coordinate_units.get(driven[0], "")) if len(driven) == 1 else None
+            if unit:
+                units[constraint.name] = unit
+    return units
+
+
+def multiplier_labels(system, coordinate_units: dict[str, str] | None = None, *, with_units: bool = True) -> list[str]:
+    """A label per holonomic multiplier: ``lambda[<constraint name>]``, with ``(<unit>)`` where
+    :func:`multiplier_units` knows it (and ``with_units``)."""
+    units = multiplier_units(system, coordinate_units) if with_units else {}
+    return [f"lambda[{c.name}]" + (f" ({units[c.name]})" if c.name in units else "") for c in system.constraints]

@@ -34,6 +34,12 @@ threshold at rounding level (``1e-10`` and below) declares such states full
 rank and the accelerations blow up (IFToMM A04).  A threshold far above the
 drift but far below the smallest singular value of a regular mechanism keeps
 both right; pass ``rank_rtol`` to ``eom.numeric`` for badly scaled models.
+
+The vibration modes of a linearization (:class:`~kronlag.studies.linearization.LinearModel`) solve
+``K_r phi = w^2 M_r phi``; an eigenvalue ``w^2`` with ``|w^2| <= ZERO_EIGENVALUE_RTOL`` times the
+problem's scale (the largest ``|w^2|``, or ``max |K| / max |M|`` of the unreduced matrices if larger)
+is zero within rounding (:func:`zero_eigenvalue_threshold`): a neutral mode (a free spin, 0 rad/s), not an
+unstable one.
 """
 
 from __future__ import annotations
@@ -43,7 +49,9 @@ import numpy as np
 from ..core.errors import InputError
 
 __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
-           "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "integrator_tolerances", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes", "singular_ratio", "c_macros"]
+           "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "ZERO_EIGENVALUE_RTOL", "integrator_tolerances",
+           "zero_eigenvalue_threshold", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes",
+           "singular_ratio", "c_macros"]
 
 #: Default relative rank tolerance on ``[Phi_q; A]`` (see the module docstring).
 RANK_RTOL = 1e-8
@@ -70,6 +78,9 @@ CVODE_TIGHTEST = 1e-14
 #: tighter tolerance only adds steps and makes the error larger (IFToMM A02: the error of B0 levels
 #: off at 1.5e-5 m with 3e-12, 4e-5 m with 1e-11, and grows again below 1e-12).
 INDEX3_TIGHTEST = 3e-12
+#: An eigenvalue ``w^2`` of a linearization at most this fraction of the problem's scale is zero
+#: within rounding (see the module docstring); rounding leaves ~1e-15 of it, a true mode far more.
+ZERO_EIGENVALUE_RTOL = 1e-9
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float, tightest: float) -> tuple[float, float]:
@@ -78,6 +89,7 @@ def integrator_tolerances(rtol: float, atol: float, scale: float, tightest: floa
     absolute accuracy takes over from relative, is kept), neither below ``tightest``, the integrator's
     rounding floor (:data:`CVODE_TIGHTEST`, :data:`INDEX3_TIGHTEST`)."""
     return max(rtol / scale, tightest), max(atol / scale, tightest)
+
 
 
 def check_rank_rtol(rank_rtol: float) -> float:
@@ -94,6 +106,14 @@ def numerical_rank(magnitudes: np.ndarray, rank_rtol: float) -> int:
     if magnitudes.size == 0 or not magnitudes.max() > 0.0:
         return 0
     return int(np.count_nonzero(magnitudes > rank_rtol * magnitudes.max()))
+
+
+def zero_eigenvalue_threshold(values: np.ndarray, scale: float = 0.0) -> float:
+    """The largest ``|w^2|`` that is zero within rounding among the eigenvalues ``values``:
+    ``ZERO_EIGENVALUE_RTOL * max(scale, max |w^2|)`` (``scale``: ``max |K| / max |M|`` of the
+    unreduced matrices)."""
+    largest = float(np.max(np.abs(np.asarray(values, dtype=float)), initial=0.0))
+    return ZERO_EIGENVALUE_RTOL * max(float(scale), largest)
 
 
 def matrix_rank(matrix: np.ndarray, rank_rtol: float = RANK_RTOL) -> int:

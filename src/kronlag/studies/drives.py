@@ -33,7 +33,7 @@ import numpy as np
 
 from ..core.errors import AssemblyError, InputError, ModelError
 from ..numeric.linalg import least_norm
-from ..numeric.reactions import reaction_columns
+from ..numeric.reactions import Reaction, column_unit, joint_reaction, multiplier_labels, reaction_columns
 from ..numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
 from ..simulation.trajectory import ColumnExport
 
@@ -102,8 +102,10 @@ class Kinematics(ColumnExport):
         columns = self._reported()
         picks = (np.unique(np.linspace(0, len(self.t) - 1, min(rows, len(self.t))).round().astype(int))
                  if len(self.t) else [])
-        lines = ["  ".join(f"{name:>12}" for name in columns)]
-        lines += ["  ".join(f"{values[i]:12.5g}" for values in columns.values()) for i in picks]
+        widths = [max(12, len(name)) for name in columns]
+        lines = ["  ".join(f"{name:>{width}}" for name, width in zip(columns, widths))]
+        lines += ["  ".join(f"{values[i]:{width}.5g}" for values, width in zip(columns.values(), widths))
+                  for i in picks]
         lines += self._summary()
         if self.message:
             lines.append(f"FAILED: {self.message}")
@@ -124,7 +126,10 @@ class InverseDynamicsRun(Kinematics):
         Multipliers with the sign of Eq. 23 (zero for drives replaced by actuators).
     reactions : dict of str to (N,) arrays
         The joints' reactions in world components (``main_bearing.Fx``, ...; see
-        :func:`kronlag.reactions.reaction_columns`).
+        :func:`kronlag.reactions.reaction_columns`); :meth:`reaction` gives one joint's as a
+        :class:`~kronlag.numeric.reactions.Reaction`.
+    model : NumericModel
+        The driven model.
     """
 
     actuated: tuple[str, ...] = ()
@@ -132,6 +137,12 @@ class InverseDynamicsRun(Kinematics):
     lam: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     mu: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     reactions: dict[str, np.ndarray] = field(default_factory=dict)
+    model: NumericModel | None = field(default=None, repr=False)
+
+    def reaction(self, name: str, *, frame: str = "world") -> Reaction:
+        """The reaction of joint ``name`` at every time, as :meth:`kronlag.Trajectory.reaction` gives
+        it; see :mod:`kronlag.numeric.reactions`."""
+        return joint_reaction(self.model, name, self.t, self.q, self.lam, frame=frame)
 
     def columns(self) -> dict[str, np.ndarray]:
         """The :class:`Kinematics` columns, then ``force_<actuated>``, ``lambda<j>``, ``mu<k>`` and the
@@ -144,14 +155,33 @@ class InverseDynamicsRun(Kinematics):
         return columns | self.reactions
 
     def _reported(self) -> dict[str, np.ndarray]:
-        """The columns of :meth:`report`: the forces and multipliers."""
-        return {k: v for k, v in self.columns().items() if k == "t" or k.startswith(("force_", "lambda", "mu"))}
+        """The columns of :meth:`report`: the forces, the multipliers of the constraints that are
+        neither a joint's nor a drive's, by constraint name (the joints' reactions are in the
+        summary)."""
+        reported = {"t": self.t} | {f"force_{name}": self.forces[:, k] for k, name in enumerate(self.actuated)}
+        if self.model is None:
+            return reported
+        system = self.model.equations.system
+        joint_rows = {row for joint in system.joints for row in joint.constraint_names} | set(system.drives)
+        reported |= {label: self.lam[:, j] for j, (label, constraint)
+                     in enumerate(zip(multiplier_labels(system), system.constraints))
+                     if constraint.name not in joint_rows}
+        return reported | {f"mu[{c.name}]": self.mu[:, k] for k, c in enumerate(system.nonholonomic_constraints)}
 
     def _summary(self) -> list[str]:
         if not self.forces.size:
             return []
         peaks = ", ".join(f"{name} {np.max(np.abs(self.forces[:, k])):.5g}" for k, name in enumerate(self.actuated))
-        return [f"max |force|: {peaks}"]
+        lines = [f"max |force|: {peaks}"]
+        by_joint: dict[str, list[str]] = {}
+        for name, values in self.reactions.items():
+            joint, _, component = name.rpartition(".")
+            by_joint.setdefault(joint, []).append(f"{name} = {np.max(np.abs(values), initial=0.0):.5g} "
+                                                  f"{column_unit(name)}")
+        if by_joint:
+            lines.append("max |joint reaction| (world components):")
+            lines += ["  " + ", ".join(components) for components in by_joint.values()]
+        return lines
 
 
 def _times(t) -> np.ndarray:
@@ -374,4 +404,4 @@ def inverse_dynamics(model: NumericModel, t, q_guess, *, actuated: Sequence[str]
     forces = -result.lam[:, drive_rows] if actuated is None else result.forces
     return InverseDynamicsRun(motion.t, motion.q, motion.qd, motion.qdd, motion.coordinate_names, motion.points,
                               motion.message, labels, forces, result.lam, result.mu,
-                              reaction_columns(model, motion.t, motion.q, result.lam))
+                              reaction_columns(model, motion.t, motion.q, result.lam), model)

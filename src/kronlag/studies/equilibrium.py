@@ -10,7 +10,7 @@ some coordinates held (drives held).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -18,6 +18,7 @@ import numpy as np
 from ..core.errors import AssemblyError, EquilibriumError
 from ..numeric.assembly import held_values
 from ..numeric.linalg import least_norm
+from ..numeric.reactions import Reaction, joint_reaction
 from .tangent import TangentEvaluator
 
 if TYPE_CHECKING:
@@ -44,6 +45,9 @@ class Equilibrium:
     residual : float
         ``max |[g - f_Q + Phi_q^T lambda (free rows); Phi]|`` at the solution.
     iterations : int
+    t : float
+        The time at which it holds.
+    model : NumericModel
     """
 
     q: np.ndarray
@@ -51,10 +55,17 @@ class Equilibrium:
     holding_forces: dict[str, float]
     residual: float
     iterations: int
+    t: float = 0.0
+    model: NumericModel | None = field(default=None, repr=False)
 
     @property
     def reactions(self) -> np.ndarray:
         return self.lam
+
+    def reaction(self, name: str, *, frame: str = "world") -> Reaction:
+        """The reaction of joint ``name`` at the equilibrium, as :meth:`kronlag.Trajectory.reaction`
+        gives it (one row: ``force`` (1, d), ``torque``, ``point``); see :mod:`kronlag.numeric.reactions`."""
+        return joint_reaction(self.model, name, [self.t], self.q[None, :], self.lam[None, :], frame=frame)
 
 
 def equilibrium(model: NumericModel, q_guess, *, fixed: Mapping | None = None, t: float = 0.0,
@@ -151,4 +162,4 @@ def equilibrium(model: NumericModel, q_guess, *, fixed: Mapping | None = None, t
                                f"(q = {q.tolist()})", residual)
     forces = evaluate(q, lam)["static"][:, 0]
     holding = {model.coordinate_names[i]: float(forces[i]) for i in held}
-    return Equilibrium(q, lam, holding, residual, iterations)
+    return Equilibrium(q, lam, holding, residual, iterations, t, model)

@@ -40,7 +40,7 @@ import sympy as sp
 
 from ..core.errors import InputError
 from ..numeric.linalg import pseudo_inverses
-from ..numeric.tolerances import RANK_RTOL, matrix_rank, numerical_rank
+from ..numeric.tolerances import RANK_RTOL, matrix_rank, numerical_rank, zero_eigenvalue_threshold
 from ..simulation.trajectory import Result, Trajectory
 from .tangent import TangentEvaluator, tangent_matrices
 
@@ -75,6 +75,9 @@ class LinearModel:
         ``R = dq/dz`` (``Phi_q R = 0``).
     q, qd, lam : the operating point, (m,), (m,), (r,).
     model : NumericModel
+    eigenvalue_scale : float
+        ``max |K| / max |M|`` of the unreduced matrices (1/s^2): the scale against which an
+        eigenvalue ``w^2`` is zero within rounding (:func:`kronlag.numeric.tolerances.zero_eigenvalue_threshold`).
     """
 
     A: np.ndarray
@@ -93,6 +96,7 @@ class LinearModel:
     lam: np.ndarray
     t: float
     model: NumericModel = field(repr=False)
+    eigenvalue_scale: float = 0.0
 
     def _modes(self) -> tuple[np.ndarray, np.ndarray]:
         """Eigenvalues ``w^2`` (ascending by real part) and M_r-normalized vectors of ``K_r phi = w^2 M_r phi``."""
@@ -106,11 +110,23 @@ class LinearModel:
     def natural_frequencies(self) -> np.ndarray:
         """Undamped natural frequencies ``w_k`` (rad/s, ascending), ``K_r phi = w^2 M_r phi``.
 
-        ``nan`` for a negative ``w^2`` (an unstable direction; see ``stiffness``).
+        ``0`` for a neutral mode, whose ``w^2`` is zero within rounding (:attr:`neutral`);
+        ``nan`` for a negative ``w^2`` beyond that (an unstable direction; see ``stiffness``).
         """
         values, _ = self._modes()
         with np.errstate(invalid="ignore"):
-            return np.where(values >= 0, np.sqrt(np.abs(values)), np.nan)
+            return np.where(self.neutral, 0.0, np.where(values > 0, np.sqrt(np.abs(values)), np.nan))
+
+    @property
+    def neutral_threshold(self) -> float:
+        """The largest ``|w^2|`` (rad^2/s^2) that is zero within rounding:
+        :data:`~kronlag.numeric.tolerances.ZERO_EIGENVALUE_RTOL` times ``max(eigenvalue_scale, max |w^2|)``."""
+        return zero_eigenvalue_threshold(self._modes()[0], self.eigenvalue_scale)
+
+    @property
+    def neutral(self) -> np.ndarray:
+        """Which modes are neutral, ``|w^2| <= neutral_threshold`` (in the order of ``natural_frequencies``)."""
+        return np.abs(self._modes()[0]) <= self.neutral_threshold
 
     @property
     def damping_ratios(self) -> np.ndarray:
@@ -128,6 +144,10 @@ class LinearModel:
         shapes = self.velocity_transformation @ vectors
         peaks = shapes[np.argmax(np.abs(shapes), axis=0), np.arange(shapes.shape[1])]
         return shapes / np.where(peaks != 0, peaks, 1.0)
+
+    def mode_shape(self, k: int) -> dict[str, float]:
+        """Mode ``k``'s shape (column ``k`` of :attr:`mode_shapes`) by coordinate name."""
+        return dict(zip(self.model.coordinate_names, self.mode_shapes[:, k].tolist()))
 
     @property
     def eigenvalues(self) -> np.ndarray:
@@ -286,8 +306,10 @@ def linearize(model: NumericModel, q, qd=None, *, t: float = 0.0, independent: S
     outputs = tuple(outputs) or names
     C = _output_rows(model, R, velocity_offset @ R, outputs, q, t)
     output_names = tuple(str(output) for output in outputs)
+    eigenvalue_scale = float(np.max(np.abs(K), initial=0.0)) / max(float(np.max(np.abs(M), initial=0.0)), 1e-300)
     return LinearModel(A, B, C, np.zeros((len(output_names), len(inputs))), tuple(names[i] for i in chosen),
-                       tuple(inputs), output_names, mass, damping, stiffness, R, q, qd, lam, t, model)
+                       tuple(inputs), output_names, mass, damping, stiffness, R, q, qd, lam, t, model,
+                       eigenvalue_scale)
 
 
 def _reduced(R, solve, M, K, H_qd, gamma_q, gamma_qd, V, W):

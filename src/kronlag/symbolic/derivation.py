@@ -36,6 +36,7 @@ from sympy.core.add import _addsort
 from sympy.core.mul import _mulsort
 
 from ..core.errors import InputError
+from ..core.kernels import piecewise_form
 from ..model.bodies import RigidBody
 from ..model.contributions import KineticTerm, Velocity
 from ..model.symbols import t
@@ -46,7 +47,12 @@ __all__ = ["derive"]
 
 
 def _se_matrix(matrix: sp.MatrixBase) -> se.DenseMatrix:
-    return se.DenseMatrix(matrix.rows, matrix.cols, [se.sympify(entry) for entry in matrix])
+    return se.DenseMatrix(matrix.rows, matrix.cols, [_symengine(entry) for entry in matrix])
+
+
+def _symengine(expr: sp.Basic) -> se.Basic:
+    """``expr`` in SymEngine, ``Min``, ``Max`` and ``Heaviside`` as ``Piecewise`` (:func:`piecewise_form`)."""
+    return se.sympify(piecewise_form(expr))
 
 
 class _SympyConverter:
@@ -78,6 +84,8 @@ class _SympyConverter:
         if not expr.args:
             return expr._sympy_()
         args = [self(arg) for arg in expr.args]
+        if isinstance(expr, se.Piecewise):  # SymEngine flattens the (value, condition) pairs
+            return sp.Piecewise(*zip(args[::2], args[1::2]))
         if isinstance(expr, se.Add):
             return _canonical_add(args)
         if isinstance(expr, se.Mul):
@@ -139,7 +147,7 @@ def _rotation_jacobian(body: RigidBody, q: list) -> se.DenseMatrix:
     if body.rotation_sequence is not None:
         jacobian = se.zeros(3, len(q))
         for axis, angle in body.rotation_sequence.body_axes():
-            angle_gradient = _jacobian(se.DenseMatrix(1, 1, [se.sympify(angle)]), q)
+            angle_gradient = _jacobian(se.DenseMatrix(1, 1, [_symengine(angle)]), q)
             if any(not entry.is_zero for entry in angle_gradient):
                 jacobian += _se_matrix(axis) * angle_gradient
         return jacobian
@@ -228,7 +236,7 @@ class _SymEngineCalculus:
 
     @staticmethod
     def scalar(expression: sp.Expr) -> se.Basic:
-        return se.sympify(expression)
+        return _symengine(expression)
 
     def matrix(self, matrix: sp.MatrixBase) -> se.DenseMatrix:
         """``matrix`` in SymEngine, converted once (a body's position serves its velocity and its weight)."""
@@ -426,9 +434,9 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
     g = se.DenseMatrix(m, 1, [se.diff(potential, qk) for qk in q])
 
     constraints = se.DenseMatrix(len(system.constraints), 1,
-                                 [se.sympify(c.expression) for c in system.constraints])
+                                 [_symengine(c.expression) for c in system.constraints])
     constraint_jacobian = _jacobian(constraints, q)
-    velocity_constraints = [se.sympify(c.expression) for c in system.nonholonomic_constraints]
+    velocity_constraints = [_symengine(c.expression) for c in system.nonholonomic_constraints]
     nonholonomic_matrix = se.DenseMatrix(len(velocity_constraints), m,
                                          [se.diff(h, v) for h in velocity_constraints for v in qd])
     zero_speeds = {v: 0 for v in qd}

@@ -23,6 +23,7 @@ import sympy as sp
 from sympy.printing.conventions import split_super_sub
 
 from ..core.errors import InputError
+from ..numeric.reactions import GENERALIZED_FORCE_UNITS, REACTION_UNITS, multiplier_labels
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -125,10 +126,20 @@ def _velocities_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) ->
                  title="Velocities", ylabel=r"$\dot{q}$")
 
 
+def _multiplier_labels(run: Trajectory | InverseDynamicsRun, units: Mapping[str, str]) -> list[str]:
+    """A legend label per multiplier, by constraint name, with its unit (``N``, ``N*m``:
+    :func:`kronlag.numeric.reactions.multiplier_units`) when the model is in SI units; a run
+    without its model has the multipliers' symbols ``lambda1``, ``mu1``, ..."""
+    if run.model is None:
+        return ([_math_label(f"lambda{j + 1}") for j in range(run.lam.shape[1])]
+                + [_math_label(f"mu{k + 1}") for k in range(run.mu.shape[1])])
+    system = run.model.equations.system
+    return (multiplier_labels(system, dict(units), with_units=units.get("energy") == "J")
+            + [f"mu[{item.name}]" for item in system.nonholonomic_constraints])
+
+
 def _multipliers_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
-    labels = ([_math_label(f"lambda{j + 1}") for j in range(traj.lam.shape[1])]
-              + [_math_label(f"mu{k + 1}") for k in range(traj.mu.shape[1])])
-    _plot_series(axes, traj.t, np.hstack([traj.lam, traj.mu]), labels,
+    _plot_series(axes, traj.t, np.hstack([traj.lam, traj.mu]), _multiplier_labels(traj, units),
                  title="Lagrange multipliers", ylabel=r"$\lambda,\ \mu$")
 
 
@@ -169,12 +180,9 @@ def _constraint_drift_panel(axes: Axes, traj: Trajectory, units: Mapping[str, st
                   va="center", color="0.4")
 
 
-#: Units of a reaction's force and couple in a model whose energy is in J.
-_REACTION_UNITS = {"force": "N", "couple": "N*m"}
-
-
 def _reaction_unit(kind: str, units: Mapping[str, str]) -> str | None:
-    return _REACTION_UNITS[kind] if units.get("energy") == "J" else None
+    """The unit of a reaction's ``"force"`` or ``"couple"`` in a model whose energy is in J."""
+    return REACTION_UNITS[kind] if units.get("energy") == "J" else None
 
 
 def _reaction_force_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str], *, joint: Joint,
@@ -428,15 +436,14 @@ def plot_inverse_dynamics(run: InverseDynamicsRun, *, path: str | PathLike | Non
     :func:`plot_trajectory`.
     """
     units = dict(units or {})
-    force_units = {"rad": "N*m", "m": "N"} if units.get("energy") == "J" else {}
+    force_units = GENERALIZED_FORCE_UNITS if units.get("energy") == "J" else {}
     series = _kinematic_series(run, units)
     series.append(("Actuator forces", "generalized force", run.forces,
                    [_with_unit(f"on {_math_label(name)}" if name in run.coordinate_names else name,
                                force_units.get(units.get(name, ""))) for name in run.actuated]))
     if run.lam.shape[1] + run.mu.shape[1]:
         series.append(("Lagrange multipliers", r"$\lambda,\ \mu$", np.hstack([run.lam, run.mu]),
-                       [_math_label(f"lambda{j + 1}") for j in range(run.lam.shape[1])]
-                       + [_math_label(f"mu{k + 1}") for k in range(run.mu.shape[1])]))
+                       _multiplier_labels(run, units)))
     joint_forces = _joint_force_magnitudes(run.reactions)
     if joint_forces:
         series.append(("Joint reaction forces", _with_unit("$|F|$", _reaction_unit("force", units)),

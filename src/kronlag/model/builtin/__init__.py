@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ...core.errors import ModelError
 from ..modelfile import ModelFile, load_model
+from ..modelfile.model_file import settle_drives
 from ..system import System
 from .arms import panda, ur5
 from .planar import (
@@ -102,18 +103,20 @@ def example_path(name: str) -> Path:
     return Path(str(resources.files(__package__) / _FILES / f"{name}.toml"))
 
 
-def load_example(name: str) -> ModelFile:
+def load_example(name: str, *, apply_drives: bool | None = None) -> ModelFile:
     """A shipped example; for a built-in model (:data:`BUILTIN_MODELS`) its system
-    is the Python model's and the file supplies the numbers."""
-    model = load_model(example_path(name))
+    is the Python model's and the file supplies the numbers.  ``apply_drives``: the
+    file's ``[[drives]]`` as :func:`~kronlag.model.modelfile.load_model` treats them."""
+    model = load_model(example_path(name), apply_drives=False)
     if name in BUILTIN_MODELS:
         model.system = BUILTIN_MODELS[name]()
-    return model
+    return settle_drives(model, apply_drives)
 
 
 def resolve_model(model: str | Path) -> ModelFile:
-    """A model given as a path to a TOML file or as the name of a built-in model or example."""
+    """A model given as a path to a TOML file or as the name of a built-in model or example, its
+    ``[[drives]]`` left out of the system (the command line applies them where it uses them)."""
     path = Path(model)
     if path.suffix == ".toml" or path.exists():
-        return load_model(path)
-    return load_example(str(model))
+        return load_model(path, apply_drives=False)
+    return load_example(str(model), apply_drives=False)

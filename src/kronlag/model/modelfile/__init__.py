@@ -4,7 +4,7 @@
 :class:`~kronlag.System` plus numbers for running it) and :func:`to_toml` /
 :func:`dump_model` write one.  Expressions are text read by
 :func:`kronlag.expressions.parse_expression`, which admits arithmetic, the
-functions ``sin cos tan asin acos atan atan2 sinh cosh tanh sqrt exp log abs``
+functions ``sin cos tan asin acos atan atan2 sinh cosh tanh sqrt exp log abs min max heaviside``
 and ``pi`` only; nothing in a file is executed.  Every error names the file,
 the entry (``bodies[2].position[1]``, indices from 0) and the problem.
 

@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import sympy as sp
 
-from ...core.errors import ModelError
+from ...core.errors import DrivesNotAppliedWarning, ModelError
 from ..system import System
 
-__all__ = ["ModelFile", "SimulationSettings", "PrescribedMotion", "to_float"]
+__all__ = ["ModelFile", "SimulationSettings", "PrescribedMotion", "to_float", "settle_drives"]
 
 
 @dataclass
@@ -55,8 +58,8 @@ class ModelFile:
     simulation : SimulationSettings
     drives : dict of str to PrescribedMotion
         Prescribed motions by drive name (``target(q) = motion(t)``) for
-        kinematic analysis and inverse dynamics; they become drives
-        (:meth:`kronlag.System.add_drive`) in :func:`kronlag.workflows.driven_model`.
+        kinematic analysis and inverse dynamics, not yet in ``system``; :meth:`driven`
+        adds them (:meth:`kronlag.System.add_drive`).
     source : str or None
         The file the model was read from.
     """
@@ -97,12 +100,33 @@ class ModelFile:
                 resolved[name] = to_float(pending.pop(name), resolved, f"value of parameter {name}")
         return resolved
 
+    def driven(self) -> ModelFile:
+        """This model with its ``drives`` added to (a copy of) its system as rheonomic constraints
+        (:meth:`kronlag.System.add_drive`), and ``drives`` then empty."""
+        system = copy.deepcopy(self.system)
+        for name, drive in self.drives.items():
+            system.add_drive(drive.target, drive.motion, name=name)
+        return dataclasses.replace(self, system=system, drives={})
+
     def guess_vectors(self) -> tuple[list[float], list[float]]:
         """The assembly guesses ``(q, qd)`` as lists in coordinate order (0 where not given)."""
         values = self.numeric_values()
         names = [q.name for q in self.system.coordinates]
         return ([to_float(self.q_guess.get(name, 0), values, f"initial q of {name}") for name in names],
                 [to_float(self.qd_guess.get(name, 0), values, f"initial qd of {name}") for name in names])
+
+
+def settle_drives(model: ModelFile, apply_drives: bool | None) -> ModelFile:
+    """``model.driven()`` if ``apply_drives``, ``model`` as it is if ``False``; if ``None``, ``model``
+    with a :class:`~kronlag.DrivesNotAppliedWarning` when it has drives, saying how to apply them."""
+    if apply_drives:
+        return model.driven()
+    if apply_drives is None and model.drives:
+        warnings.warn(f"{model.source or model.system.name}: the [[drives]] ({', '.join(model.drives)}) are not "
+                      "in the system: ModelFile.driven() (or load_model(..., apply_drives=True)) adds them; "
+                      "apply_drives=False takes the model without them and without this warning",
+                      DrivesNotAppliedWarning, stacklevel=3)
+    return model
 
 
 def to_float(expression, values: Mapping[str, float], what: str) -> float:

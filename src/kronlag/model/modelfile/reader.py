@@ -20,7 +20,7 @@ from ..expressions import RESERVED_NAMES, parse_expression
 from ..symbols import speed_symbol, t
 from ..system import System, drive_name
 from .formats import FIELD_KINDS, LOAD_FORMATS, read_rotation
-from .model_file import ModelFile, PrescribedMotion, SimulationSettings
+from .model_file import ModelFile, PrescribedMotion, SimulationSettings, settle_drives
 from .units import si_unit
 
 __all__ = ["loads_model", "load_model"]
@@ -397,8 +397,14 @@ def loads_model(text: str, *, source: str = "<string>") -> ModelFile:
     return _read(document, source)
 
 
-def load_model(path: str | Path) -> ModelFile:
+def load_model(path: str | Path, *, apply_drives: bool | None = None) -> ModelFile:
     """Read a model file (TOML; the format is described in the module docstring).
+
+    A file's ``[[drives]]`` prescribe motions for kinematic analysis and inverse dynamics;
+    they are kept in :attr:`ModelFile.drives`, out of the system, unless ``apply_drives``
+    (then the system has them: :meth:`ModelFile.driven`).  With ``apply_drives=None`` (the
+    default) a file with drives gives a :class:`~kronlag.DrivesNotAppliedWarning` that says so;
+    ``False`` is the same model without the warning.
 
     Raises
     ------
@@ -411,4 +417,4 @@ def load_model(path: str | Path) -> ModelFile:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
         raise ModelFileError(f"{path}: cannot read the file: {error}") from None
-    return loads_model(text, source=str(path))
+    return settle_drives(loads_model(text, source=str(path)), apply_drives)
