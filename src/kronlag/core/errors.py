@@ -39,6 +39,7 @@ __all__ = [
     "RedundantConstraintsWarning",
     "ActuationWarning",
     "InitialStateWarning",
+    "CacheWarning",
 ]
 
 
@@ -111,3 +112,8 @@ class ActuationWarning(KronlagWarning):
 
 class InitialStateWarning(KronlagWarning):
     """The initial state violated the constraints and was projected onto them."""
+
+
+class CacheWarning(KronlagWarning):
+    """The cache directory of compiled code cannot be used (not the user's alone, not writable, or a
+    library there does not carry its key): a private temporary directory is used instead."""
