@@ -67,42 +67,122 @@ def test_cache_directory_is_created_private(tmp_path, monkeypatch):
     assert libraries and all(Path(f"{library}.sha256").is_file() for library in libraries)
 
 
+def check_fallback(cache: Path, reason: str) -> None:
+    """A C model built with the cache ``cache`` in a fresh process warns once (CacheWarning naming
+    ``cache`` and ``reason``), computes the right M and leaves nothing in ``cache``."""
+    script = textwrap.dedent("""
+        import warnings
+        import sympy as sp
+        import kronlag
+        q1, = kronlag.coordinates("q1")
+        m1 = sp.Symbol("m1")
+        system = kronlag.System([q1], parameters=[m1], name="point")
+        system.add_body(kronlag.PointMass("p", mass=3 * m1, position=(q1, 0)))
+        system.add_generalized_force([1])
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for _ in range(2):  # a second model: no second warning
+                model = kronlag.derive(system).numeric({"m1": 2.0})
+                values = (model.backend, model.M([0.0])[0, 0], model.forward_dynamics([0.0], [0.0]).qdd[0])
+        print(*values)
+        for warning in caught:
+            print(warning.category.__name__, warning.message)
+    """)
+    process = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600,
+                             env={**os.environ, "KRONLAG_CACHE": str(cache)})
+    assert process.returncode == 0, process.stderr
+    values, *warnings = process.stdout.splitlines()
+    backend, mass, acceleration = values.split()
+    assert (backend, float(mass)) == ("c", 6.0) and float(acceleration) == pytest.approx(1 / 6, rel=1e-14)
+    assert len(warnings) == 1 and warnings[0].startswith("CacheWarning"), warnings
+    assert str(cache) in warnings[0] and reason in warnings[0] and "private temporary directory" in warnings[0]
+
+
 @needs_compiler
-def test_world_writable_cache_directory_is_refused(tmp_path, monkeypatch):
+def test_world_writable_cache_directory_is_not_used(tmp_path):
     cache = tmp_path / "shared"
     cache.mkdir()
     cache.chmod(0o777)
-    monkeypatch.setenv("KRONLAG_CACHE", str(cache))
-    with pytest.raises(PermissionError, match=rf"{cache}.*writable by its group and others"):
-        point_mass(1).numeric({"m1": 1.0}, backend="c")
+    check_fallback(cache, "writable by its group and others")
     assert not list(cache.iterdir())
 
 
 @needs_compiler
-def test_cache_directory_inside_a_world_writable_directory_is_refused(tmp_path, monkeypatch):
+def test_cache_directory_inside_a_world_writable_directory_is_not_used(tmp_path):
     shared = tmp_path / "shared"
     shared.mkdir()
     shared.chmod(0o777)  # no sticky bit: anyone may rename the cache away and put their own in its place
-    monkeypatch.setenv("KRONLAG_CACHE", str(shared / "cache"))
-    with pytest.raises(PermissionError, match=rf"inside {shared}, which everyone may write to"):
-        point_mass(1).numeric({"m1": 1.0}, backend="c")
+    check_fallback(shared / "cache", f"inside {shared}, which everyone may write to")
+    assert not list((shared / "cache").iterdir())
+
+
+@needs_compiler
+def test_cache_directory_that_cannot_be_created_is_not_used(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("a regular file, so no directory can be made below it")
+    check_fallback(blocker / "cache", "cannot be created")
+
+
+@needs_compiler
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root writes to a mode-500 directory")
+def test_read_only_cache_directory_is_not_used(tmp_path):
+    cache = tmp_path / "cache"
+    cache.mkdir(mode=0o500)
+    check_fallback(cache, "not writable")
 
 
 @needs_compiler
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="needs root to chown")
-def test_cache_directory_of_another_user_is_refused(tmp_path, monkeypatch):
+def test_cache_directory_of_another_user_is_not_used(tmp_path):
     import pwd
 
     nobody = pwd.getpwnam("nobody")
     cache = tmp_path / "planted"
     cache.mkdir(mode=0o700)
     os.chown(cache, nobody.pw_uid, nobody.pw_gid)
-    monkeypatch.setenv("KRONLAG_CACHE", str(cache))
-    with pytest.raises(PermissionError, match=rf"{cache}.*owned by uid {nobody.pw_uid}"):
-        point_mass(1).numeric({"m1": 1.0}, backend="c")
-    # the automatic choice refuses too: the directory is the user's to fix, not a reason to go slow
-    with pytest.raises(PermissionError):
-        point_mass(1).numeric({"m1": 1.0})
+    check_fallback(cache, f"owned by uid {nobody.pw_uid}")
+    assert not list(cache.iterdir())
+
+
+@needs_compiler
+def test_swapped_libraries_with_their_digests_are_rebuilt(tmp_path):
+    """The files of two models exchanged, digests included: each model still computes its own M."""
+    script = textwrap.dedent("""
+        import sys
+        import sympy as sp
+        import kronlag
+        factor = int(sys.argv[1])
+        q1, = kronlag.coordinates("q1")
+        m1 = sp.Symbol("m1")
+        system = kronlag.System([q1], parameters=[m1], name="point")
+        system.add_body(kronlag.PointMass("p", mass=factor * m1, position=(q1, 0)))
+        system.add_generalized_force([1])
+        model = kronlag.derive(system).numeric({"m1": 1.0}, backend="c")
+        print(model.M([0.0])[0, 0], model.forward_dynamics([0.0], [0.0]).qdd[0])
+    """)
+    cache = tmp_path / "cache"
+
+    def run(factor: int) -> tuple[float, float]:
+        process = subprocess.run([sys.executable, "-W", "error", "-c", script, str(factor)], capture_output=True,
+                                 text=True, timeout=600, env={**os.environ, "KRONLAG_CACHE": str(cache)})
+        assert process.returncode == 0, process.stderr
+        return tuple(map(float, process.stdout.split()))
+
+    assert run(2) == pytest.approx((2.0, 0.5), rel=1e-14)  # the symbolic M = 2 m1 and qdd = 1 / M
+    first = {path: path.stat().st_mtime_ns for path in cache.glob("kronlag_*.so")}
+    assert run(3) == pytest.approx((3.0, 1 / 3), rel=1e-14)
+    second = sorted(set(cache.glob("kronlag_*.so")) - set(first), key=lambda path: path.stat().st_mtime_ns)
+    first = sorted(first, key=first.get)
+    assert len(first) == len(second) == 2  # the dynamics, then the other matrices (M)
+    for a, b in zip(first, second):  # the libraries built in the same order play the same part
+        for suffix in ("", ".sha256"):
+            a_file, b_file, swap = Path(f"{a}{suffix}"), Path(f"{b}{suffix}"), tmp_path / "swap"
+            os.replace(a_file, swap)
+            os.replace(b_file, a_file)
+            os.replace(swap, b_file)
+    assert run(2) == pytest.approx((2.0, 0.5), rel=1e-14)  # still its own M, not the other model's
+    assert run(3) == pytest.approx((3.0, 1 / 3), rel=1e-14)
+    assert len(list(cache.glob("kronlag_*.so"))) == 4
 
 
 @needs_compiler

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import ModelError
+from ..core.errors import InputError, ModelError
+from ..core.limits import MAX_OUTPUT_POINTS
 from ..model.builtin import BUILTIN_MODELS, example_names, example_path, resolve_model
 from ..model.modelfile import ModelFile, SimulationSettings, load_model
 from ..simulation import METHODS
@@ -199,9 +200,15 @@ class ProgressBar:
 
 
 def _output_grid(t_end: float, arguments: argparse.Namespace, default_points: int) -> np.ndarray:
-    """Output times 0 .. t_end: every ``--dt``, or ``--points`` evenly spaced, or ``default_points``."""
+    """Output times 0 .. t_end: every ``--dt``, or ``--points`` evenly spaced, or ``default_points``;
+    InputError for more than :data:`~kronlag.core.limits.MAX_OUTPUT_POINTS` (before allocating them)."""
     if arguments.dt is not None:
+        if t_end / arguments.dt + 1 > MAX_OUTPUT_POINTS:
+            raise InputError(f"--dt {arguments.dt:g} gives {t_end / arguments.dt + 1:.3g} output times up to "
+                             f"t = {t_end:g}, more than the limit of {MAX_OUTPUT_POINTS}: give a larger --dt")
         return np.append(np.arange(0.0, t_end * (1 - 1e-12), arguments.dt), t_end)
+    if arguments.points is not None and arguments.points > MAX_OUTPUT_POINTS:
+        raise InputError(f"--points {arguments.points}: more than the limit of {MAX_OUTPUT_POINTS} output times")
     return np.linspace(0.0, t_end, arguments.points or default_points)
 
 

@@ -40,6 +40,7 @@ __all__ = [
     "ActuationWarning",
     "InitialStateWarning",
     "DrivesNotAppliedWarning",
+    "CacheWarning",
 ]
 
 
@@ -116,3 +117,8 @@ class InitialStateWarning(KronlagWarning):
 
 class DrivesNotAppliedWarning(KronlagWarning):
     """A model file's ``[[drives]]`` were read but not added to its system (``ModelFile.driven()`` does)."""
+
+
+class CacheWarning(KronlagWarning):
+    """The cache directory of compiled code cannot be used (not the user's alone, not writable, or a
+    library there does not carry its key): a private temporary directory is used instead."""

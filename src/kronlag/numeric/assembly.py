@@ -7,14 +7,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..core.errors import AssemblyError
+from ..core.errors import AssemblyError, InputError
 from .linalg import velocity_constraints
 from .projection import project_positions, project_velocities
 
 if TYPE_CHECKING:
     from .numeric_model import NumericModel
 
-__all__ = ["assemble", "held_values"]
+__all__ = ["assemble", "held_values", "finite_guess"]
 
 
 def assemble(model: NumericModel, q_guess, *, fixed: Mapping | None = None, qd_guess=None, qd_fixed: Mapping | None = None,
@@ -44,11 +44,14 @@ def assemble(model: NumericModel, q_guess, *, fixed: Mapping | None = None, qd_g
 
     Raises
     ------
+    InputError
+        A guess or held value is not a finite number (the message names the coordinate).
     AssemblyError
         No solution near the guess (the message gives the residual).
     """
     q = model.state_vector(q_guess, "q_guess").copy()
     held = held_values(model, fixed, q)
+    finite_guess(model, q, "q_guess" if not held else "q_guess (with the held values)")
     free = [i for i in range(model.m) if i not in held]
     positions = project_positions(model, q, t, tol=tol, free=free, max_iterations=max_iterations)
     q, residual = positions.q, positions.residual
@@ -58,6 +61,7 @@ def assemble(model: NumericModel, q_guess, *, fixed: Mapping | None = None, qd_g
                             f"{_unsatisfied(model, positions.terms['Phi'], tol)}", residual)
     qd = np.zeros(model.m) if qd_guess is None else model.state_vector(qd_guess, "qd_guess").copy()
     held = held_values(model, qd_fixed, qd)
+    finite_guess(model, qd, "qd_guess" if not held else "qd_guess (with the held values)")
     qd = project_velocities(model, q, qd, t, free=[i for i in range(model.m) if i not in held],
                             terms=positions.terms)
     if model.r + model.s:
@@ -86,3 +90,11 @@ def held_values(model: NumericModel, values: Mapping | None, target: np.ndarray)
     for i, value in zip(indices, values.values()):
         target[i] = float(value)
     return set(indices)
+
+
+def finite_guess(model: NumericModel, vector: np.ndarray, what: str) -> None:
+    """InputError naming the coordinates where ``vector`` (a guess, shape (m,)) is NaN or infinite:
+    the iterations would otherwise stop in a linear-algebra error ("SVD did not converge")."""
+    bad = [f"{name} ({value})" for name, value in zip(model.coordinate_names, vector) if not np.isfinite(value)]
+    if bad:
+        raise InputError(f"{what} is not finite for {', '.join(bad)}")

@@ -68,8 +68,9 @@ def _c_file(name: str) -> str:
 @lru_cache(maxsize=None)
 def _driver_library(source: str) -> ctypes.CDLL:
     """``source`` (a model's C source with kernels and a driver appended) compiled once (cached on
-    disk by :func:`codegen.compile_shared_library`, keyed by a hash of the source) and loaded."""
-    return ctypes.CDLL(str(codegen.compile_shared_library(source)))
+    disk by :func:`codegen.compile_shared_library`, keyed by a hash of the source), loaded and its key
+    checked (:func:`codegen.load_shared_library`)."""
+    return codegen.load_shared_library(source)
 
 
 @dataclass(frozen=True)

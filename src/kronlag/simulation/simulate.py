@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..core.errors import AssemblyError, InitialStateWarning, InputError, SingularConfigurationError
+from ..core.limits import MAX_OUTPUT_POINTS
 from ..numeric.linalg import velocity_constraints
 from .control import RunControl
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
@@ -31,6 +32,8 @@ def _output_times(t_eval: Sequence[float] | np.ndarray | None, t0: float, t1: fl
     if t_eval is None:
         return None
     times = np.asarray(t_eval, dtype=float).ravel()
+    if times.size > MAX_OUTPUT_POINTS:
+        raise InputError(f"t_eval has {times.size} output times, more than the limit of {MAX_OUTPUT_POINTS}")
     if times.size == 0:
         raise InputError("t_eval is empty: give at least one output time (or None for every step)")
     if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0) or times[0] < t0 or times[-1] > t1:

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..core.errors import AssemblyError, InputError, ModelError
+from ..core.limits import MAX_OUTPUT_POINTS
 from ..numeric.linalg import least_norm
 from ..numeric.reactions import Reaction, column_unit, joint_reaction, multiplier_labels, reaction_columns
 from ..numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
@@ -188,6 +189,8 @@ def _times(t) -> np.ndarray:
     times = np.asarray(t, dtype=float)
     if times.ndim != 1 or len(times) == 0:
         raise InputError(f"t must be a non-empty 1-d sequence of times, got shape {times.shape}")
+    if len(times) > MAX_OUTPUT_POINTS:
+        raise InputError(f"t has {len(times)} times, more than the limit of {MAX_OUTPUT_POINTS}")
     if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
         raise InputError("t must be finite and strictly increasing")
     return times

@@ -19,6 +19,7 @@ from ..bodies import BODY_TYPES, Body
 from ..expressions import RESERVED_NAMES, parse_expression
 from ..symbols import speed_symbol, t
 from ..system import System, drive_name
+from .bounds import check_document, check_text, read_bounded
 from .formats import FIELD_KINDS, LOAD_FORMATS, read_rotation
 from .model_file import ModelFile, PrescribedMotion, SimulationSettings, settle_drives
 from .units import si_unit
@@ -214,9 +215,9 @@ def _read(document: dict, source: str) -> ModelFile:
     model = ModelFile(system=system, description=description, values=values, units=units, source=source)
     _read_settings(reader, document, model)
     with reader.entry("parameters"):
-        model.numeric_values()
+        numbers = model.numeric_values()
     with reader.entry("initial"):
-        model.guess_vectors()
+        model.guess_vectors(values=numbers)
     return model
 
 
@@ -389,11 +390,14 @@ def _read_settings(reader: _Reader, document: dict, model: ModelFile) -> None:
 
 
 def loads_model(text: str, *, source: str = "<string>") -> ModelFile:
-    """Read a model from TOML text; ``source`` names it in error messages."""
+    """Read a model from TOML text; ``source`` names it in error messages.  The text's size, nesting
+    and numbers of entries are limited (:mod:`kronlag.core.limits`)."""
+    check_text(text, source)
     try:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise ModelFileError(f"{source}: not valid TOML: {error}") from None
+    check_document(document, source)
     return _read(document, source)
 
 
@@ -413,8 +417,4 @@ def load_model(path: str | Path, *, apply_drives: bool | None = None) -> ModelFi
         entry and the problem.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise ModelFileError(f"{path}: cannot read the file: {error}") from None
-    return settle_drives(loads_model(text, source=str(path)), apply_drives)
+    return settle_drives(loads_model(read_bounded(path), source=str(path)), apply_drives)

@@ -16,7 +16,8 @@ The two backends only print the result:
   (the solver at ``-O3``, the kernels at ``-O2``, long ones at ``-O1``; see
   :func:`compile_shared_library`) into a shared library, cached on disk under ``$KRONLAG_CACHE`` or
   ``~/.cache/kronlag`` (a private directory; keyed by a hash of the source and
-  the flags, content hash checked before loading), loaded with :mod:`ctypes`
+  the flags, content hash checked before loading, the key the library exports checked after
+  loading), loaded with :mod:`ctypes`
   and called through the fixed call layer ``kronlag.numeric.codegen._call`` built at install
   time (ctypes when it is missing).  Large kernels are split into functions of
   :data:`C_CHUNK` statements (compilers are superlinear in the size of a
@@ -42,7 +43,8 @@ system (``kronlag_forward_dynamics``, ``numeric/codegen/c/augmented.c``).
 
 from ...core.errors import CompilerError
 from ...core.kernels import Block, Kernel, literal, python_source
-from .build import C_LARGE_SOURCE, c_compiler, cache_directory, compile_shared_library
+from .build import (C_LARGE_SOURCE, KEY_FUNCTION, c_compiler, cache_directory, compile_shared_library,
+                    load_shared_library)
 from .c_backend import FAST_CALL, CLibrary, batch_threads, c_file, c_kernel, solver_header
 from .layouts import LAYOUTS, dynamics_shape, layout, layout_macros
 from .python_backend import KernelLibrary, PythonLibrary
@@ -67,6 +69,8 @@ __all__ = [
     "c_compiler",
     "cache_directory",
     "compile_shared_library",
+    "load_shared_library",
+    "KEY_FUNCTION",
     "batch_threads",
     "literal",
     "python_source",

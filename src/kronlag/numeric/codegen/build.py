@@ -1,7 +1,11 @@
-"""Compiling generated C into shared libraries, cached on disk in a private directory."""
+"""Compiling generated C into shared libraries, cached on disk in a private directory, each library
+carrying the key of its source (checked after loading)."""
 
 from __future__ import annotations
 
+import _ctypes
+import atexit
+import ctypes
 import hashlib
 import os
 import shutil
@@ -9,11 +13,17 @@ import stat
 import subprocess
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
-from ...core.errors import CompilerError
+from ...core.errors import CacheWarning, CompilerError
 
-__all__ = ["c_compiler", "cache_directory", "compile_shared_library", "C_LARGE_SOURCE"]
+__all__ = ["c_compiler", "cache_directory", "compile_shared_library", "load_shared_library", "C_LARGE_SOURCE",
+           "KEY_FUNCTION"]
+
+#: The function every compiled library exports, ``const char *kronlag_library_key(void)``: the key in
+#: its file name, checked after loading (a library is bound to the source it was built from).
+KEY_FUNCTION = "kronlag_library_key"
 
 _CFLAGS = ("-fno-math-errno", "-fPIC", "-pthread")
 #: Optimization level of the hand-written C (solvers, integrators, batch loops) and of small kernels.
@@ -39,39 +49,78 @@ def c_compiler() -> str | None:
 def cache_directory() -> Path:
     """Where compiled libraries are cached: ``$KRONLAG_CACHE`` or ``~/.cache/kronlag``.
 
-    :func:`compile_shared_library` creates it with mode 0700 and refuses to use it
-    (PermissionError) unless it belongs to the user and no one else can write to it.
+    :func:`compile_shared_library` creates it with mode 0700 and uses it only if it belongs to the
+    user, no one else can write to it and it is writable; otherwise it warns once
+    (:class:`CacheWarning`, naming the directory and the reason) and uses a private temporary
+    directory for the rest of the process.
     """
     return Path(os.environ.get("KRONLAG_CACHE") or Path.home() / ".cache" / "kronlag")
 
 
-def _private_cache_directory() -> Path:
-    """:func:`cache_directory`, created 0700; PermissionError naming it unless it is the user's alone.
+#: The private temporary directory used instead of each unusable cache directory (one warning each).
+_FALLBACKS: dict[Path, Path] = {}
+
+
+def _cache_problems(directory: Path) -> list[str]:
+    """Why ``directory`` (created 0700 if missing) cannot hold compiled code: empty if it can.
 
     A library there is loaded into the process: a directory another user can
     write to would let that user run code as whoever runs kronlag.
     """
-    directory = cache_directory()
-    directory.mkdir(mode=0o700, parents=True, exist_ok=True)
-    status = directory.stat()
+    try:
+        directory.mkdir(mode=0o700, parents=True, exist_ok=True)
+        status = directory.stat()
+    except OSError as error:
+        return [f"it cannot be created ({error.strerror or error})"]
     problems = []
     if not stat.S_ISDIR(status.st_mode):
-        problems.append("not a directory")
+        problems.append("it is not a directory")
     if hasattr(os, "geteuid") and status.st_uid != os.geteuid():
-        problems.append(f"owned by uid {status.st_uid}, not by you (uid {os.geteuid()})")
+        problems.append(f"it is owned by uid {status.st_uid}, not by you (uid {os.geteuid()})")
     writers = [who for who, bit in (("its group", stat.S_IWGRP), ("others", stat.S_IWOTH)) if status.st_mode & bit]
     if writers:
-        problems.append(f"writable by {' and '.join(writers)} (mode {stat.S_IMODE(status.st_mode):o})")
+        problems.append(f"it is writable by {' and '.join(writers)} (mode {stat.S_IMODE(status.st_mode):o})")
     for parent in directory.resolve().parents:  # anyone could rename the directory away and plant another
         mode = parent.stat().st_mode
         if mode & stat.S_IWOTH and not mode & stat.S_ISVTX:
-            problems.append(f"inside {parent}, which everyone may write to "
+            problems.append(f"it is inside {parent}, which everyone may write to "
                             f"(mode {stat.S_IMODE(mode):o}, no sticky bit)")
+    if not problems and not os.access(directory, os.W_OK | os.X_OK):
+        problems.append("it is not writable")
+    return problems
+
+
+def _temporary_cache(why: str) -> Path:
+    """A new private directory (mkdtemp: mode 0700, the user's) removed at exit; CompilerError
+    starting with ``why`` if none can be made."""
+    try:
+        directory = Path(tempfile.mkdtemp(prefix="kronlag-cache-"))
+    except OSError as error:
+        raise CompilerError(f"{why}, nor create a private temporary directory: {error}") from None
+    atexit.register(shutil.rmtree, directory, ignore_errors=True)
+    return directory
+
+
+def _fallback_directory(directory: Path, reason: str) -> Path:
+    """A private temporary directory (0700, removed at exit) used instead of ``directory``; the
+    first time for ``directory``, a :class:`CacheWarning` naming it and ``reason``."""
+    if directory not in _FALLBACKS:
+        fallback = _temporary_cache(f"cannot use the kronlag cache directory {directory} ({reason})")
+        warnings.warn(f"not using the kronlag cache directory {directory}: {reason}; compiled code goes to the "
+                      f"private temporary directory {fallback} for this run (point $KRONLAG_CACHE to a directory "
+                      "of your own, mode 700, to keep it)", CacheWarning, stacklevel=4)
+        _FALLBACKS[directory] = fallback
+    return _FALLBACKS[directory]
+
+
+def _private_cache_directory() -> Path:
+    """:func:`cache_directory` if it is the user's alone and writable, else its private fallback."""
+    directory = cache_directory()
+    if directory in _FALLBACKS:
+        return _FALLBACKS[directory]
+    problems = _cache_problems(directory)
     if problems:
-        raise PermissionError(
-            f"refusing to use the kronlag cache directory {directory}: it is {'; '.join(problems)}. Compiled "
-            "code loaded from there runs in this process, so it must be yours alone: run "
-            f"`chmod 700 {directory}` if it is yours, or point $KRONLAG_CACHE to a private directory")
+        return _fallback_directory(directory, "; ".join(problems))
     return directory
 
 
@@ -99,6 +148,24 @@ def _write_atomically(target: Path, data: bytes, work: Path) -> None:
     os.replace(temporary, target)
 
 
+def _keyed_source(source: str, key: str) -> str:
+    """``source`` with :data:`KEY_FUNCTION` returning ``key`` (in part 0 of a library compiled in parts)."""
+    return (f"{source}\n#if !defined(KRONLAG_PART) || KRONLAG_PART == 0\n"
+            f"const char *{KEY_FUNCTION}(void) {{ return \"{key}\"; }}\n#endif\n")
+
+
+def _build_plan(source: str, parts: int) -> tuple[str, list[tuple[str, ...]], str]:
+    """The compiler, the optimization flags of each part and the library's key (a hash of them and the source)."""
+    compiler = c_compiler()
+    if compiler is None:
+        raise CompilerError("the C backend needs a C compiler (gcc or cc on PATH, or $CC); "
+                            "use backend='python'")
+    kernel_level = _LARGE_KERNEL_OPTIMIZATION if len(source) > C_LARGE_SOURCE else _OPTIMIZATION
+    levels = [_SOLVER_FLAGS] + [(kernel_level,)] * (parts - 1) if parts > 1 else [(_OPTIMIZATION,)]
+    key = hashlib.sha256("\0".join((compiler, *_CFLAGS, *map(" ".join, levels), source)).encode()).hexdigest()[:32]
+    return compiler, levels, key
+
+
 def compile_shared_library(source: str, *, parts: int = 1) -> Path:
     """Compile C ``source`` into a shared library in :func:`cache_directory` (reused when intact).
 
@@ -107,30 +174,80 @@ def compile_shared_library(source: str, *, parts: int = 1) -> Path:
     ``KRONLAG_IN_PART`` selects) and the objects are linked; part 0, the
     hand-written C, with :data:`_SOLVER_FLAGS` (``-O3``), the others, the generated
     kernel chunks, at ``-O2``, or ``-O1`` when the source is longer than
-    :data:`C_LARGE_SOURCE` characters.  A single part is compiled at ``-O2``.  The library is
-    renamed into place, then its SHA-256 is written next to it
-    (``<library>.sha256``); a library whose content does not match its recorded
-    hash (truncated, replaced, or its build interrupted) is rebuilt, never returned.
+    :data:`C_LARGE_SOURCE` characters.  A single part is compiled at ``-O2``.  The library
+    exports ``const char *kronlag_library_key(void)`` (:data:`KEY_FUNCTION`) returning its key,
+    the hash of the source and the flags in its name (``kronlag_<key>.so``), which
+    :func:`load_shared_library` checks after loading.  The library is renamed into place, then its
+    SHA-256 is written next to it (``<library>.sha256``); a library whose content does not match
+    its recorded hash (truncated, replaced, or its build interrupted) is rebuilt, never returned.
 
     Raises
     ------
     CompilerError
         No compiler, or it failed.
-    PermissionError
-        The cache directory is not the user's alone (see :func:`cache_directory`).
     """
-    compiler = c_compiler()
-    if compiler is None:
-        raise CompilerError("the C backend needs a C compiler (gcc or cc on PATH, or $CC); "
-                            "use backend='python'")
-    kernel_level = _LARGE_KERNEL_OPTIMIZATION if len(source) > C_LARGE_SOURCE else _OPTIMIZATION
-    levels = [_SOLVER_FLAGS] + [(kernel_level,)] * (parts - 1) if parts > 1 else [(_OPTIMIZATION,)]
-    key = hashlib.sha256("\0".join((compiler, *_CFLAGS, *map(" ".join, levels), source)).encode()).hexdigest()[:32]
+    compiler, levels, key = _build_plan(source, parts)
+    target = _private_cache_directory() / f"kronlag_{key}.so"
+    return target if _intact(target) else _build(compiler, levels, _keyed_source(source, key), target)
+
+
+def load_shared_library(source: str, *, parts: int = 1) -> ctypes.CDLL:
+    """:func:`compile_shared_library`, loaded with :mod:`ctypes` and checked to be the library of
+    ``source``: one whose key does not match (the files of two models swapped, a truncated or
+    foreign file) is rebuilt; if the rebuilt one does not match either, a :class:`CacheWarning`
+    and the library is built again in a private temporary directory.
+
+    Raises
+    ------
+    CompilerError
+        No compiler, it failed, or not even the library built privately carries the key.
+    """
+    compiler, levels, key = _build_plan(source, parts)
+    source = _keyed_source(source, key)
     directory = _private_cache_directory()
     target = directory / f"kronlag_{key}.so"
-    if _intact(target):
-        return target
-    with tempfile.TemporaryDirectory(dir=directory) as work:
+    if _intact(target) and (library := _load_keyed(target, key)):
+        return library
+    try:
+        _build(compiler, levels, source, target)
+    except OSError as error:  # full, or made read-only since it was checked
+        target = _fallback_directory(cache_directory(), f"writing there failed ({error})") / target.name
+        _build(compiler, levels, source, target)
+    if library := _load_keyed(target, key):
+        return library
+    private = _temporary_cache(f"the library {target} does not carry its key {key} after rebuilding")
+    warnings.warn(f"the compiled library {target} still does not carry its key {key} after rebuilding it: "
+                  f"building it again in the private temporary directory {private}", CacheWarning, stacklevel=2)
+    target = _build(compiler, levels, source, private / target.name)
+    if library := _load_keyed(target, key):
+        return library
+    raise CompilerError(f"the library built from this model's C code in {private} does not carry its key {key}")
+
+
+def _load_keyed(path: Path, key: str) -> ctypes.CDLL | None:
+    """The library at ``path`` loaded, if its :data:`KEY_FUNCTION` returns ``key``; else None (unloaded again)."""
+    try:
+        library = ctypes.CDLL(str(path))
+    except OSError:  # not a shared library of this machine, or truncated
+        return None
+    try:
+        function = getattr(library, KEY_FUNCTION)
+    except AttributeError:
+        function = None
+    if function is not None:
+        function.argtypes, function.restype = [], ctypes.c_char_p
+        if function() == key.encode():
+            return library
+    unload = getattr(_ctypes, "dlclose", None)
+    if unload is not None:  # so that the path can be loaded again once rebuilt
+        unload(library._handle)
+    return None
+
+
+def _build(compiler: str, levels: list[tuple[str, ...]], source: str, target: Path) -> Path:
+    """Compile ``source`` (in parts, one per entry of ``levels``) into ``target``, then write its digest."""
+    parts = len(levels)
+    with tempfile.TemporaryDirectory(dir=target.parent) as work:
         source_path = Path(work) / "model.c"
         source_path.write_text(source)
         objects = [Path(work) / f"part{i}.o" for i in range(parts)]

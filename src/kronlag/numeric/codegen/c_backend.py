@@ -15,7 +15,7 @@ import symengine as se
 
 from ...core.kernels import PLACEHOLDER, Kernel, literal
 from ..tolerances import RANK_RTOL, c_macros
-from .build import compile_shared_library
+from .build import load_shared_library
 from .layouts import dynamics_shape, layout_macros
 from .python_backend import _vector
 
@@ -151,8 +151,7 @@ class CLibrary:
             parts.append(c_file("linalg.c") + c_file("augmented.c") + c_file("forward_dynamics_batch.c") + "#endif\n")
         self.source = "\n".join(parts)
         # part 0 (the solver) is small: one process per core for the kernel chunks besides it
-        self.path = compile_shared_library(self.source, parts=1 + min(chunks - 1, os.cpu_count() or 1, 8))
-        self.library = ctypes.CDLL(str(self.path))
+        self.library = load_shared_library(self.source, parts=1 + min(chunks - 1, os.cpu_count() or 1, 8))
         self.functions = {}
         for name in self.kernels:
             function = getattr(self.library, f"kronlag_{name}")
