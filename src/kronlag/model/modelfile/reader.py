@@ -19,6 +19,7 @@ from ..bodies import BODY_TYPES, Body
 from ..expressions import RESERVED_NAMES, parse_expression
 from ..symbols import speed_symbol, t
 from ..system import System, drive_name
+from .dimension_check import check_file_dimensions
 from .formats import FIELD_KINDS, LOAD_FORMATS, read_rotation
 from .model_file import ModelFile, PrescribedMotion, SimulationSettings
 from .units import si_unit
@@ -215,6 +216,7 @@ def _read(document: dict, source: str) -> ModelFile:
     _read_settings(reader, document, model)
     with reader.entry("parameters"):
         model.numeric_values()
+    check_file_dimensions(document, model)
     with reader.entry("initial"):
         model.guess_vectors()
     return model
