@@ -410,50 +410,71 @@ class DimensionCheck:
 
     def _conflict(self, involved: list[int], declarations: list[int]) -> DimensionConflict:
         """The conflict among the equations ``involved`` (the last one just entered), blamed on one
-        declaration: a definition just entered (against its own unit, or against the uses); else the
-        unit, then the definition, of a parameter the failing expression names; else the first unit."""
+        declaration: a definition just entered (against its parameter's unit, or against its uses);
+        else the unit, then the definition, of a parameter the failing expression names; else the
+        first unit."""
         last = involved[-1]
         origin = self.equations[last][1]
         if isinstance(origin, _Declaration):
-            unit = next((i for i in declarations if self.equations[i][1].kind == "unit"
-                         and self.equations[i][1].parameter == origin.parameter), None)
-            if unit is not None and all(isinstance(self.equations[i][1], _Declaration) for i in involved):
-                return self._definition_against_unit(involved, last, unit)
-            blamed_index = last
-        else:
-            named = self.equations[last][2]
-            blamed_index = min(declarations, key=lambda i: (self.equations[i][1].parameter not in named,
-                                                            self.equations[i][1].kind != "unit", i))
+            return self._definition(involved, last)
+        named = self.equations[last][2]
+        blamed_index = min(declarations, key=lambda i: (self.equations[i][1].parameter not in named,
+                                                        self.equations[i][1].kind != "unit", i))
         blamed = self.equations[blamed_index][1]
         index = self.parameters[blamed.parameter]
         others = [i for i in involved if i != blamed_index]
-        declared = self._value([blamed_index] if blamed.kind == "unit" else declarations, index)
-        used_as = self._value(others, index)
-        uses = list(dict.fromkeys(self._text(self.equations[i][1]) for i in reversed(others)
-                                  if isinstance(self.equations[i][1], Place)))  # the failing use first
-        where = ", ".join(uses[:3]) + (f" and {len(uses) - 3} more" if len(uses) > 3 else "")
+        if blamed.kind == "unit":
+            declared = self._solved([blamed_index]).value(_Form({index: Fraction(1)}))
+        else:
+            declared = self._solved(others).value(self._defined(blamed_index))
         return DimensionConflict(self._text(blamed.place),
                                  f"{blamed.text!r} is {_described(declared)}, but {blamed.parameter} is used "
-                                 f"as {_described(used_as)} in {where}")
+                                 f"as {_described(self._solved(others).value(_Form({index: Fraction(1)})))} "
+                                 f"in {self._places(others)}")
 
-    def _definition_against_unit(self, involved: list[int], definition: int, unit: int) -> DimensionConflict:
+    def _definition(self, involved: list[int], definition: int) -> DimensionConflict:
+        """A definition that contradicts its parameter's unit or uses."""
         declaration = self.equations[definition][1]
-        stated = self.equations[unit][1]
         index = self.parameters[declaration.parameter]
-        others = [i for i in involved if i != unit]
-        units = sorted({self.equations[i][1].parameter for i in others if i != definition})
-        source = f" (from the units of {', '.join(units)})" if units else ""
+        others = [i for i in involved if i != definition]
+        value = _described(self._solved(others).value(self._defined(definition)))
+        unit = next((i for i in others if isinstance(self.equations[i][1], _Declaration)
+                     and self.equations[i][1].kind == "unit" and self.equations[i][1].parameter == declaration.parameter),
+                    None)
+        if unit is None:
+            used_as = _described(self._solved(others).value(_Form({index: Fraction(1)})))
+            return DimensionConflict(self._text(declaration.place),
+                                     f"{declaration.text!r} is {value}, but {declaration.parameter} is used as "
+                                     f"{used_as} in {self._places(others)}")
+        stated = self.equations[unit][1]
+        sources = [self.equations[i][1].parameter for i in others
+                   if i != unit and isinstance(self.equations[i][1], _Declaration)]
+        places = [i for i in others if isinstance(self.equations[i][1], Place)]
+        reasons = ([f"the units of {', '.join(sorted(set(sources)))}"] if sources else []) \
+            + ([self._places(places)] if places else [])
+        source = f" (from {' and '.join(reasons)})" if reasons else ""
         return DimensionConflict(self._text(declaration.place),
-                                 f"{declaration.text!r} is {_described(self._value(others, index))}{source}, but "
+                                 f"{declaration.text!r} is {value}{source}, but "
                                  f"{self._text(stated.place)} {stated.text!r} is "
-                                 f"{_described(self._value([unit], index))}")
+                                 f"{_described(self._solved([unit]).value(_Form({index: Fraction(1)})))}")
 
-    def _value(self, equations: list[int], index: int) -> Dimension | None:
-        """The dimension of unknown ``index`` under the given equations alone."""
+    def _defined(self, definition: int) -> _Form:
+        """The form of a definition's expression (its equation is ``parameter / expression``)."""
+        parameter = self.parameters[self.equations[definition][1].parameter]
+        return _Form({parameter: Fraction(1)}).times(self.equations[definition][0], -1)
+
+    def _places(self, equations: list[int]) -> str:
+        """The uses among ``equations``, the last entered (the failing one) first, at most three."""
+        uses = list(dict.fromkeys(self._text(self.equations[i][1]) for i in reversed(equations)
+                                  if isinstance(self.equations[i][1], Place)))
+        return ", ".join(uses[:3]) + (f" and {len(uses) - 3} more" if len(uses) > 3 else "")
+
+    def _solved(self, equations: list[int]) -> _Solver:
+        """A solver of the given equations alone."""
         solver = _Solver()
         for i in equations:
             solver.add(self.equations[i][0], i)
-        return solver.value(_Form({index: Fraction(1)}))
+        return solver
 
 
 def _described(dimension: Dimension | None) -> str:
@@ -517,7 +538,7 @@ def _body_uses(body: Body, entry: str):
 
 def _load_uses(load, entry: str, description: str, system: System):
     def place(field: str) -> Place:
-        return Place(f"{entry}.{field}", f"{description} {field}")
+        return Place(f"{entry}.{field}", description if field in ("force", "torque") else f"{description} {field}")
 
     if isinstance(load, Spring | Damper):
         for field in ("point_a", "point_b"):
@@ -572,10 +593,12 @@ def si_parameter_values(system: System, values: Mapping) -> dict:
             one = (1 * quantity.units).to_base_units()
             check_si_factor(float(one.magnitude))
             magnitude = float(quantity.magnitude) * float(one.magnitude)
-        except (OverflowError, ValueError, TypeError) as error:
-            raise InputError(f"parameter {name}: {quantity!r} cannot be converted to SI: {error}") from None
+        except OverflowError:
+            raise InputError(f"parameter {name}: {quantity:~} cannot be used: its unit's SI factor overflows") from None
+        except (ValueError, TypeError) as error:
+            raise InputError(f"parameter {name}: {quantity:~} cannot be used: {error}") from None
         if not math.isfinite(magnitude):
-            raise InputError(f"parameter {name}: {quantity!r} is not a finite number in SI ({magnitude})")
+            raise InputError(f"parameter {name}: {quantity:~} is not a finite number in SI ({magnitude})")
         converted[key] = magnitude
         if name in check.parameters:
             place = Place(f"parameter {name}", f"parameter {name}")
