@@ -18,8 +18,8 @@ A number written in an expression is SI: as a term of a sum it takes the sum's d
 as a pint quantity in Python: :func:`si_parameter_values`) has that unit's dimension; one
 without a unit, and every coordinate, takes the dimension its uses give it.
 
-The checks are a linear system in the exponents: the units and the derived parameters'
-definitions are entered first, then the uses.  A use that contradicts what is known is refused
+The checks are a linear system in the exponents: the units are entered first, then the uses, then
+the derived parameters' definitions.  An equation that contradicts what is known is refused
 when the contradiction involves a unit (:class:`DimensionConflict`, naming the unit or the
 definition and the uses); among quantities that have no unit at all (a parameter taken "as given
 in SI", a coordinate) a contradiction is not refused, since nothing declared is wrong there.
@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import heapq
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import TYPE_CHECKING
@@ -56,7 +56,7 @@ _ORDER = ("[mass]", "[length]", "[time]")
 class Dimension:
     """A product of powers of base dimensions (pint's names: ``"[mass]"``, ``"[length]"``, ...).
 
-    ``Dimension.of(quantity.dimensionality)``; ``*``, ``/`` and ``**`` combine them.
+    ``Dimension(quantity.dimensionality)`` for a pint quantity; ``*``, ``/`` and ``**`` combine them.
     """
 
     __slots__ = ("powers",)
@@ -65,11 +65,6 @@ class Dimension:
         items = dict(powers)
         self.powers = tuple(sorted(((base, Fraction(power).limit_denominator(1000)) for base, power in items.items()
                                     if power != 0), key=lambda item: _sort_key(item[0])))
-
-    @classmethod
-    def of(cls, dimensionality: Mapping[str, float]) -> Dimension:
-        """The dimension of pint's ``quantity.dimensionality``."""
-        return cls(dimensionality)
 
     def __mul__(self, other: Dimension) -> Dimension:
         return self.combine(other, 1)
@@ -178,6 +173,11 @@ class _Form:
 
 def _known(dimension: Dimension) -> _Form:
     return _Form({}, dimension)
+
+
+def _unknown(index: int) -> _Form:
+    """The dimension of unknown ``index`` (a symbol's)."""
+    return _Form({index: Fraction(1)})
 
 
 class _Solver:
@@ -294,7 +294,7 @@ class DimensionCheck:
         self.symbols: dict[sp.Symbol, _Form] = {t: _known(TIME)}
         self.parameters: dict[str, int] = {}
         for index, symbol in enumerate((*system.parameters, *system.coordinates)):
-            self.symbols[symbol] = _Form({index: Fraction(1)})
+            self.symbols[symbol] = _unknown(index)
             if index < len(system.parameters):
                 self.parameters[symbol.name] = index
         for q in system.coordinates:
@@ -308,7 +308,7 @@ class DimensionCheck:
     def unit(self, parameter: str, dimension: Dimension, *, unit: str, place: Place) -> None:
         """The parameter is given in ``unit`` (as written), of ``dimension``."""
         self._names = frozenset((parameter,))
-        form = _Form({self.parameters[parameter]: Fraction(1)}, dimension ** -1)
+        form = _unknown(self.parameters[parameter]).times(_known(dimension), -1)
         self._equate(form, _Declaration(parameter, place, unit, "unit"))
 
     def derived(self, parameter: str, expression: sp.Expr, *, text: str, place: Place) -> None:
@@ -316,7 +316,7 @@ class DimensionCheck:
         declaration = _Declaration(parameter, place, text, "value")
         value = self._start(expression, declaration)
         if value is not _NUMBER:
-            self._equate(_Form({self.parameters[parameter]: Fraction(1)}).times(value, -1), declaration)
+            self._equate(_unknown(self.parameters[parameter]).times(value, -1), declaration)
 
     def use(self, expression: sp.Expr, dimension: Dimension | None, place: Place) -> None:
         """``expression`` is used as a ``dimension`` (None: only its own sums must be homogeneous)."""
@@ -344,7 +344,7 @@ class DimensionCheck:
         """The dimension of an expression (None for a pure number), requiring its parts to fit."""
         if isinstance(expression, sp.Symbol):
             if expression not in self.symbols:
-                self.symbols[expression] = self._unknown()
+                self.symbols[expression] = self._fresh()
             return self.symbols[expression]
         if not expression.args:
             return _NUMBER
@@ -379,7 +379,7 @@ class DimensionCheck:
             for part in known:  # a symbolic power, sin, exp, log, ...: of dimensionless arguments
                 self._equate(part, origin)
             return _known(DIMENSIONLESS)
-        return self._unknown()  # nothing known about other constructs: no requirement either
+        return self._fresh()  # nothing known about other constructs: no requirement either
 
     def _alike(self, parts: list[_Form | None], origin: Place | _Declaration) -> _Form | None:
         """The common dimension of terms (numbers take it)."""
@@ -388,9 +388,9 @@ class DimensionCheck:
             self._equate(part.times(known[0], -1), origin)
         return known[0] if known else _NUMBER
 
-    def _unknown(self) -> _Form:
+    def _fresh(self) -> _Form:
         self._unknowns += 1
-        return _Form({self._unknowns: Fraction(1)})
+        return _unknown(self._unknowns)
 
     def _equate(self, form: _Form, origin: Place | _Declaration) -> None:
         self.equations.append((form, origin, self._names))
@@ -398,7 +398,7 @@ class DimensionCheck:
         if contradiction is None:
             return
         declarations = [i for i in contradiction if isinstance(self.equations[i][1], _Declaration)]
-        if not any(self.equations[i][1].kind == "unit" for i in declarations):
+        if not any(self._is_unit(i) for i in declarations):
             self.equations[-1] = (_Form({}), origin, self._names)  # no unit involved: taken as given (see above)
             return
         raise self._conflict(sorted(contradiction), declarations)
@@ -424,12 +424,12 @@ class DimensionCheck:
         index = self.parameters[blamed.parameter]
         others = [i for i in involved if i != blamed_index]
         if blamed.kind == "unit":
-            declared = self._solved([blamed_index]).value(_Form({index: Fraction(1)}))
+            declared = self._solved([blamed_index]).value(_unknown(index))
         else:
             declared = self._solved(others).value(self._defined(blamed_index))
         return DimensionConflict(self._text(blamed.place),
                                  f"{blamed.text!r} is {_described(declared)}, but {blamed.parameter} is used "
-                                 f"as {_described(self._solved(others).value(_Form({index: Fraction(1)})))} "
+                                 f"as {_described(self._solved(others).value(_unknown(index)))} "
                                  f"in {self._places(others)}")
 
     def _definition(self, involved: list[int], definition: int) -> DimensionConflict:
@@ -438,17 +438,14 @@ class DimensionCheck:
         index = self.parameters[declaration.parameter]
         others = [i for i in involved if i != definition]
         value = _described(self._solved(others).value(self._defined(definition)))
-        unit = next((i for i in others if isinstance(self.equations[i][1], _Declaration)
-                     and self.equations[i][1].kind == "unit" and self.equations[i][1].parameter == declaration.parameter),
-                    None)
+        unit = next((i for i in others if self._is_unit(i, declaration.parameter)), None)
         if unit is None:
-            used_as = _described(self._solved(others).value(_Form({index: Fraction(1)})))
+            used_as = _described(self._solved(others).value(_unknown(index)))
             return DimensionConflict(self._text(declaration.place),
                                      f"{declaration.text!r} is {value}, but {declaration.parameter} is used as "
                                      f"{used_as} in {self._places(others)}")
         stated = self.equations[unit][1]
-        sources = [self.equations[i][1].parameter for i in others
-                   if i != unit and isinstance(self.equations[i][1], _Declaration)]
+        sources = [self.equations[i][1].parameter for i in others if i != unit and self._is_unit(i)]
         places = [i for i in others if isinstance(self.equations[i][1], Place)]
         reasons = ([f"the units of {', '.join(sorted(set(sources)))}"] if sources else []) \
             + ([self._places(places)] if places else [])
@@ -456,12 +453,17 @@ class DimensionCheck:
         return DimensionConflict(self._text(declaration.place),
                                  f"{declaration.text!r} is {value}{source}, but "
                                  f"{self._text(stated.place)} {stated.text!r} is "
-                                 f"{_described(self._solved([unit]).value(_Form({index: Fraction(1)})))}")
+                                 f"{_described(self._solved([unit]).value(_unknown(index)))}")
+
+    def _is_unit(self, equation: int, parameter: str | None = None) -> bool:
+        """Whether the equation is a unit (of ``parameter``)."""
+        origin = self.equations[equation][1]
+        return isinstance(origin, _Declaration) and origin.kind == "unit" and parameter in (None, origin.parameter)
 
     def _defined(self, definition: int) -> _Form:
         """The form of a definition's expression (its equation is ``parameter / expression``)."""
         parameter = self.parameters[self.equations[definition][1].parameter]
-        return _Form({parameter: Fraction(1)}).times(self.equations[definition][0], -1)
+        return _unknown(parameter).times(self.equations[definition][0], -1)
 
     def _places(self, equations: list[int]) -> str:
         """The uses among ``equations``, the last entered (the failing one) first, at most three."""
@@ -497,8 +499,8 @@ def _uses(system: System):
         for k, value in enumerate(point.position):
             yield Place(f"{entry}[{k}]", f"point {name!r}"), value, LENGTH
     if system.gravity is not None:
-        for k, value in enumerate(system.gravity):
-            yield Place(f"gravity[{k}]", f"gravity[{k}]"), value, _ACCELERATION
+        yield from ((Place(f"gravity[{k}]", f"gravity[{k}]"), value, _ACCELERATION)
+                    for k, value in enumerate(system.gravity))
     joint_rows = {}
     for j, joint in enumerate(system.joints):
         for row in joint.constraint_names:
@@ -517,12 +519,10 @@ def _uses(system: System):
         index = counts[table] = counts.get(table, -1) + 1
         kind = _LOAD_KINDS.get(table, type(load).__name__)
         yield from _load_uses(load, f"{table}[{index}]", f"{kind} {load.name!r}", system)
-    for key in ("drawing", "traces"):
+    for key, field in (("drawing", "points"), ("traces", "point")):
         for i, line in enumerate(getattr(system, key)):
-            for k, point in enumerate(line.points):
-                for value in point:
-                    yield Place(f"{key}[{i}].point{'s' if key == 'drawing' else ''}", f"{key} {line.name!r}"), \
-                        value, LENGTH
+            place = Place(f"{key}[{i}].{field}", f"{key} {line.name!r}")
+            yield from ((place, value, LENGTH) for point in line.points for value in point)
 
 
 def _body_uses(body: Body, entry: str):
@@ -541,26 +541,19 @@ def _load_uses(load, entry: str, description: str, system: System):
         return Place(f"{entry}.{field}", description if field in ("force", "torque") else f"{description} {field}")
 
     if isinstance(load, Spring | Damper):
-        for field in ("point_a", "point_b"):
-            for value in getattr(load, field):
-                yield place(field), value, LENGTH
+        yield from ((place(field), value, LENGTH) for field in ("point_a", "point_b") for value in getattr(load, field))
         if isinstance(load, Spring):
             yield place("stiffness"), load.stiffness, _ENERGY / LENGTH ** 2
             yield place("free_length"), load.free_length, LENGTH
         else:
             yield place("coefficient"), load.coefficient, _FORCE * TIME / LENGTH
     elif isinstance(load, PointForce):
-        for value in load.point:
-            yield place("point"), value, LENGTH
-        for value in load.value:
-            yield place("force"), value, _FORCE
+        yield from ((place("point"), value, LENGTH) for value in load.point)
+        yield from ((place("force"), value, _FORCE) for value in load.value)
     elif isinstance(load, BodyTorque):
-        for value in load.value:
-            yield place("torque"), value, _ENERGY
+        yield from ((place("torque"), value, _ENERGY) for value in load.value)
     elif isinstance(load, GeneralizedForce):
-        for q, value in zip(system.coordinates, load.value):
-            # the force times its coordinate is an energy
-            yield place("force"), value * q, _ENERGY
+        yield from ((place("force"), value * q, _ENERGY) for q, value in zip(system.coordinates, load.value))
     else:
         yield Place(f"{entry}.expression", description), load.potential(), _ENERGY
 
@@ -602,6 +595,6 @@ def si_parameter_values(system: System, values: Mapping) -> dict:
         converted[key] = magnitude
         if name in check.parameters:
             place = Place(f"parameter {name}", f"parameter {name}")
-            check.unit(name, Dimension.of(one.dimensionality), unit=f"{quantity:~}", place=place)
+            check.unit(name, Dimension(one.dimensionality), unit=f"{quantity:~}", place=place)
     check.system_uses()
     return converted

@@ -28,7 +28,7 @@ def check_file_dimensions(document: dict, model: ModelFile) -> None:
             if isinstance(item, dict) and "unit" in item:
                 one, _ = si_unit(item["unit"])
                 place = Place(f"parameters.{name}.unit", f"parameter {name}")
-                check.unit(name, Dimension.of(one.dimensionality), unit=item["unit"], place=place)
+                check.unit(name, Dimension(one.dimensionality), unit=item["unit"], place=place)
         check.system_uses()
         for i, drive in enumerate(model.drives.values()):
             check.same(drive.target, drive.motion, Place(f"drives[{i}].motion", f"drives[{i}].motion"))
