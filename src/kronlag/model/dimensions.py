@@ -62,9 +62,9 @@ class Dimension:
     __slots__ = ("powers",)
 
     def __init__(self, powers: Mapping[str, Fraction | int | float] = ()):
-        items = dict(powers)
-        self.powers = tuple(sorted(((base, Fraction(power).limit_denominator(1000)) for base, power in items.items()
-                                    if power != 0), key=lambda item: _sort_key(item[0])))
+        order = {base: i for i, base in enumerate(_ORDER)}
+        self.powers = tuple(sorted(((base, Fraction(power).limit_denominator(1000)) for base, power in dict(powers).items()
+                                    if power != 0), key=lambda item: (order.get(item[0], len(order)), item[0])))
 
     def __mul__(self, other: Dimension) -> Dimension:
         return self.combine(other, 1)
@@ -88,14 +88,14 @@ class Dimension:
     def __hash__(self) -> int:
         return hash(self.powers)
 
-    def __bool__(self) -> bool:
-        """False for the dimensionless."""
+    def __bool__(self) -> bool:  # False for the dimensionless
         return bool(self.powers)
 
     def formula(self) -> str:
         """``"mass*length^2/time^2"``; ``"1"`` when dimensionless."""
         def factors(items):
-            return "*".join(base.strip("[]") + ("" if power == 1 else f"^{_power(power)}") for base, power in items)
+            return "*".join(base.strip("[]") + ("" if power == 1 else f"^{power}" if power.denominator == 1
+                                                else f"^({power})") for base, power in items)
         above = factors((base, power) for base, power in self.powers if power > 0) or "1"
         below = [(base, -power) for base, power in self.powers if power < 0]
         if not below:
@@ -112,14 +112,6 @@ class Dimension:
 
     def __repr__(self) -> str:
         return f"Dimension({self.formula()})"
-
-
-def _sort_key(base: str) -> tuple[int, str]:
-    return (_ORDER.index(base) if base in _ORDER else len(_ORDER), base)
-
-
-def _power(power: Fraction) -> str:
-    return str(power) if power.denominator == 1 else f"({power})"
 
 
 DIMENSIONLESS = Dimension()
@@ -161,14 +153,12 @@ class _Form:
     constant: Dimension = DIMENSIONLESS
 
     def times(self, other: _Form, power: Fraction | int = 1) -> _Form:
+        """``self * other**power``."""
         coefficients = dict(self.coefficients)
         for index, value in other.coefficients.items():
-            total = coefficients.get(index, 0) + value * power
-            if total:
-                coefficients[index] = total
-            else:
-                coefficients.pop(index, None)
-        return _Form(coefficients, self.constant.combine(other.constant, power))
+            coefficients[index] = coefficients.get(index, 0) + value * power
+        return _Form({index: value for index, value in coefficients.items() if value},
+                     self.constant.combine(other.constant, power))
 
 
 def _known(dimension: Dimension) -> _Form:
@@ -181,51 +171,66 @@ def _unknown(index: int) -> _Form:
 
 
 class _Solver:
-    """Equations ``form = dimensionless`` kept in triangular form, each row with the combination of the
-    equations it came from (so that a contradiction names the equations behind it)."""
+    """Equations ``form = dimensionless`` kept in triangular form.  Each row records how it was made
+    (its equation, scaled, minus multiples of earlier rows), so that a contradiction can name the
+    equations behind it without every row carrying that list."""
 
     def __init__(self):
-        self.rows: dict[int, tuple[_Form, dict[int, Fraction]]] = {}  # pivot -> (row, provenance); row[pivot] = 1
+        # pivot -> (row with coefficient 1 at the pivot, its equation, its scale, the (pivot, factor) subtracted)
+        self.rows: dict[int, tuple[_Form, int, Fraction, tuple[tuple[int, Fraction], ...]]] = {}
         self.rank: dict[int, int] = {}  # pivot -> when it became one
 
-    def reduce(self, form: _Form, provenance: dict[int, Fraction]) -> tuple[_Form, dict[int, Fraction]]:
-        """The form with every pivot eliminated (earliest first: a row holds only later pivots)."""
+    def reduce(self, form: _Form) -> tuple[_Form, list[tuple[int, Fraction]]]:
+        """The form with every pivot eliminated (earliest first: a row holds only later pivots), and the
+        ``(pivot, factor)`` of the rows subtracted."""
         queue = [(self.rank[index], index) for index in form.coefficients if index in self.rows]
         heapq.heapify(queue)
-        provenance = dict(provenance)
+        steps = []
         while queue:
             _, pivot = heapq.heappop(queue)
             factor = form.coefficients.get(pivot)
             if factor is None:
                 continue
-            row, origin = self.rows[pivot]
+            row = self.rows[pivot][0]
             form = form.times(row, -factor)
-            for index, value in origin.items():
-                total = provenance.get(index, 0) - factor * value
-                if total:
-                    provenance[index] = total
-                else:
-                    provenance.pop(index, None)
-            queue.extend((self.rank[index], index) for index in row.coefficients
-                         if index in self.rows and index != pivot and index in form.coefficients)
-            heapq.heapify(queue)
-        return form, provenance
+            steps.append((pivot, factor))
+            for index in row.coefficients:
+                if index in self.rows and index != pivot and index in form.coefficients:
+                    heapq.heappush(queue, (self.rank[index], index))
+        return form, steps
 
     def add(self, form: _Form, equation: int) -> dict[int, Fraction] | None:
-        """Enter ``form = dimensionless``; the provenance of a contradiction, else None."""
-        form, provenance = self.reduce(form, {equation: Fraction(1)})
+        """Enter ``form = dimensionless``; for a contradiction, the equations combined into it (with
+        their factors), else None."""
+        form, steps = self.reduce(form)
         if not form.coefficients:
-            return provenance if form.constant else None
+            return self._combination(equation, steps) if form.constant else None
         pivot = min(form.coefficients)
         scale = 1 / form.coefficients[pivot]
-        row = _Form({}).times(form, scale)
-        self.rows[pivot] = (row, {index: value * scale for index, value in provenance.items()})
+        self.rows[pivot] = (_Form({}).times(form, scale), equation, scale, tuple(steps))
         self.rank[pivot] = len(self.rank)
         return None
 
+    def _combination(self, equation: int, steps: list[tuple[int, Fraction]]) -> dict[int, Fraction]:
+        """The equations' factors in ``equation - sum(factor * row)``, the rows expanded latest first."""
+        factors = {equation: Fraction(1)}
+        pending = {pivot: -factor for pivot, factor in steps}
+        queue = [(-self.rank[pivot], pivot) for pivot in pending]
+        heapq.heapify(queue)
+        while queue:
+            _, pivot = heapq.heappop(queue)
+            weight = pending.pop(pivot)
+            _, source, scale, made = self.rows[pivot]
+            factors[source] = factors.get(source, 0) + weight * scale
+            for earlier, factor in made:  # made of earlier rows only: expanded after this one
+                if earlier not in pending:
+                    heapq.heappush(queue, (-self.rank[earlier], earlier))
+                pending[earlier] = pending.get(earlier, 0) - weight * scale * factor
+        return {index: factor for index, factor in factors.items() if factor}
+
     def value(self, form: _Form) -> Dimension | None:
         """The dimension the equations give ``form``; None where they leave it open."""
-        form, _ = self.reduce(form, {})
+        form, _ = self.reduce(form)
         return None if form.coefficients else form.constant
 
 
@@ -241,15 +246,8 @@ class Place:
 
 
 class DimensionConflict(ModelError):
-    """A unit or a derived parameter's definition that does not fit how the parameter is used.
-
-    Attributes
-    ----------
-    entry : str
-        Where the conflict is located: the model-file entry, or the parameter in Python.
-    problem : str
-        What does not fit, naming the other places.
-    """
+    """A unit or a derived parameter's definition that does not fit how the parameter is used: ``entry``
+    (the model-file entry, or the parameter in Python) and ``problem`` (naming the other places)."""
 
     def __init__(self, entry: str, problem: str):
         super().__init__(f"{entry}: {problem}")
