@@ -81,20 +81,21 @@ def test_model_file_joint_errors_name_the_entry(change, message):
 
 def test_point_coordinates_can_be_used_in_constraints_and_forces():
     """``crank_pin_y`` in a constraint is the world y of the named body point."""
-    text = ENGINE.read_text().replace("[[torques]]", '''[[constraints]]
+    text = ENGINE.read_text().replace("[parameters]", '[parameters]\nk = {value = 50.0, unit = "N/m"}').replace(
+        "[[torques]]", '''[[constraints]]
 name = "pin on the axis"
 expression = "crank_pin_y"
 
 [[forces]]
 name = "push"
 point = "wrist"
-force = ["-tau*wrist_x", 0]
+force = ["-k*wrist_x", 0]
 
 [[torques]]''')
     system = loads_model(text, source="engine.toml").system
     assert system.constraints[-1].expression == system.point("crank_pin").position[1]
     force = next(f for f in system.forces if f.name == "push")
-    assert force.value[0] == -sp.Symbol("tau") * system.point("wrist").position[0]
+    assert force.value[0] == -sp.Symbol("k") * system.point("wrist").position[0]
     clash = ENGINE.read_text().replace("[parameters]", "[parameters]\nwrist_x = 1.0")
     with pytest.raises(ModelFileError, match=r"bodies\[2\].points.wrist: the coordinate names wrist_x"):
         loads_model(clash, source="engine.toml")

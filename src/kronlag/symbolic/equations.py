@@ -11,6 +11,7 @@ import symengine as se
 import sympy as sp
 
 from ..core.errors import InputError
+from ..model.dimensions import si_parameter_values
 from . import matrices as catalogue
 from .calculus import matrix_derivative
 
@@ -238,8 +239,10 @@ class Equations:
         Parameters
         ----------
         parameters : dict
-            Value of every parameter, keyed by name or symbol: a float, or a
-            callable ``f(t)`` for a time-varying one (e.g. a torque).
+            Value of every parameter, keyed by name or symbol: a float (SI), a pint quantity
+            (converted to SI after its dimension is checked against the parameter's use in the
+            system: :func:`kronlag.model.dimensions.si_parameter_values`), or a callable ``f(t)``
+            for a time-varying one (e.g. a torque).
         backend : {"auto", "c", "python"}
             ``"auto"``: ``"c"`` when a C compiler is available and works, else ``"python"``
             (``"numpy"``: deprecated name of ``"python"``).
@@ -249,6 +252,7 @@ class Equations:
         """
         from ..numeric.numeric_model import NumericModel  # a convenience above this layer (the layer contract)
 
+        parameters = si_parameter_values(self.system, parameters)
         return NumericModel(self, parameters, backend=backend, **({} if rank_rtol is None else {"rank_rtol": rank_rtol}))
 
     # -- printing ---------------------------------------------------------------

@@ -20,6 +20,7 @@ from ..expressions import RESERVED_NAMES, parse_expression
 from ..symbols import speed_symbol, t
 from ..system import System, drive_name
 from .bounds import check_document, check_text, read_bounded
+from .dimension_check import check_file_dimensions
 from .formats import FIELD_KINDS, LOAD_FORMATS, read_rotation
 from .model_file import ModelFile, PrescribedMotion, SimulationSettings, settle_drives
 from .units import si_unit
@@ -216,6 +217,7 @@ def _read(document: dict, source: str) -> ModelFile:
     _read_settings(reader, document, model)
     with reader.entry("parameters"):
         numbers = model.numeric_values()
+    check_file_dimensions(document, model)
     with reader.entry("initial"):
         model.guess_vectors(values=numbers)
     return model

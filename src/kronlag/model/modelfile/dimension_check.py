@@ -1,0 +1,46 @@
+"""The dimensional check of a model file: every parameter's unit and every derived parameter's
+definition against how the file uses them (:mod:`kronlag.model.dimensions` infers the dimensions)."""
+
+from __future__ import annotations
+
+from ...core.errors import ModelFileError
+from ..dimensions import Dimension, DimensionCheck, DimensionConflict, Place
+from ..symbols import speed_symbol
+from .model_file import ModelFile
+from .units import si_unit
+
+__all__ = ["check_file_dimensions"]
+
+
+def check_file_dimensions(document: dict, model: ModelFile) -> None:
+    """Check the dimensions of a model read from ``document`` (its parsed TOML).
+
+    Raises
+    ------
+    ModelFileError
+        ``FILE: parameters.m3.unit: 'mm' is a length, but m3 is used as a mass in bodies[2].mass``:
+        a unit, or a derived parameter's definition, that does not fit the parameter's uses.
+    """
+    check = DimensionCheck(model.system, in_file=True)
+    table = document.get("parameters", {})
+    try:
+        for name, item in table.items():
+            if isinstance(item, dict) and "unit" in item:
+                one, _ = si_unit(item["unit"])
+                place = Place(f"parameters.{name}.unit", f"parameter {name}")
+                check.unit(name, Dimension(one.dimensionality), unit=item["unit"], place=place)
+        check.system_uses()
+        for i, drive in enumerate(model.drives.values()):
+            check.same(drive.target, drive.motion, Place(f"drives[{i}].motion", f"drives[{i}].motion"))
+        coordinates = {q.name: q for q in model.system.coordinates}
+        for key, guesses in (("q", model.q_guess), ("qd", model.qd_guess)):
+            for name, value in guesses.items():
+                symbol = coordinates[name] if key == "q" else speed_symbol(coordinates[name])
+                check.same(symbol, value, Place(f"initial.{key}.{name}", f"initial.{key}.{name}"))
+        for name, value in model.values.items():
+            if value.free_symbols:
+                written = table[name]["value"] if isinstance(table[name], dict) else table[name]
+                entry = f"parameters.{name}.value" if isinstance(table[name], dict) else f"parameters.{name}"
+                check.derived(name, value, text=written, place=Place(entry, f"parameter {name}"))
+    except DimensionConflict as conflict:
+        raise ModelFileError(f"{model.source}: {conflict.entry}: {conflict.problem}") from None
