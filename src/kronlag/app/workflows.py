@@ -129,9 +129,10 @@ def check_model(model: ModelFile, *, equations: Equations | None = None) -> Mode
 
 
 def numeric_model(model: ModelFile, *, equations: Equations | None = None) -> NumericModel:
-    """``derive(model.system).numeric(values)`` with the file's parameter values."""
+    """``derive(model.system).numeric(model.values)``: the file's parameter values, those written as
+    expressions of others kept as definitions (computed again by ``with_parameters``)."""
     eom = equations if equations is not None else derive(model.system)
-    return eom.numeric(model.numeric_values())
+    return eom.numeric(model.values)
 
 
 def initial_state(model: ModelFile, numeric: NumericModel) -> tuple[np.ndarray, np.ndarray]:
@@ -311,7 +312,7 @@ def driven_model(model: ModelFile, drives: Mapping[str, PrescribedMotion]) -> Nu
     system = copy.deepcopy(model.system)
     for name, drive in drives.items():
         system.add_drive(drive.target, drive.motion, name=name)
-    return derive(system).numeric(model.numeric_values())
+    return derive(system).numeric(model.values)
 
 
 def kinematics_along(model: ModelFile, drives: Mapping[str, PrescribedMotion],
