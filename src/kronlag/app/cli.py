@@ -6,7 +6,8 @@ lists them) or the path of a TOML model file (format: :mod:`kronlag.modelfile`).
 Exit status: 0 success; 2 bad input, found before any computation (one line
 on stderr, no traceback); 1 the run did not complete: a numerical failure or an
 output that could not be written (the other outputs are written, and what was
-computed is saved; stderr says where).
+computed is saved; stderr says where); 130 interrupted (Ctrl-C; what finished is
+saved, stderr says where).
 
 The exit status follows the class of what went wrong (:data:`EXIT_CODES`, the hierarchy of
 :mod:`kronlag.core.errors`): bad input (:class:`~kronlag.core.errors.InputError`, an unreadable
@@ -26,9 +27,9 @@ from ..core.errors import CompilerError, InputError, NumericalError
 from . import analysis_commands, commands
 from .outputs import IncompleteRun
 
-__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_INCOMPLETE", "EXIT_BAD_INPUT", "EXIT_CODES"]
+__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_INCOMPLETE", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "EXIT_CODES"]
 
-EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 #: Exit status and message prefix by exception class, the first match in this order.
 EXIT_CODES: tuple[tuple[type[BaseException], int, str], ...] = (
@@ -37,6 +38,7 @@ EXIT_CODES: tuple[tuple[type[BaseException], int, str], ...] = (
     (CompilerError, EXIT_INCOMPLETE, "compiled code: "),
     (InputError, EXIT_BAD_INPUT, "error: "),
     (OSError, EXIT_BAD_INPUT, "error: "),
+    (KeyboardInterrupt, EXIT_INTERRUPTED, "interrupted: "),
 )
 
 
@@ -72,7 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_OK
     except tuple(kind for kind, _, _ in EXIT_CODES) as error:
         status, prefix = next((status, prefix) for kind, status, prefix in EXIT_CODES if isinstance(error, kind))
-        print(f"kronlag: {prefix}{error}", file=sys.stderr)
+        print(f"kronlag: {prefix}{error}" if str(error) else f"kronlag: {prefix.removesuffix(': ')}", file=sys.stderr)
         return status
     return EXIT_OK
 

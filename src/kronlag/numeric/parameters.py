@@ -163,7 +163,10 @@ def _in_dependency_order(names: tuple[str, ...], expressions: Mapping[int, sp.Ex
             if waiting[user] == 0:
                 order.append(user)
     if len(order) < len(expressions):
-        cycle = sorted(names[i] for i in expressions.keys() - set(order))
+        left = expressions.keys() - set(order)  # the cycles and what depends on them
+        while (used := set().union(*(uses[i] for i in left)) & left) != left:  # drop the mere dependents
+            left = used
+        cycle = sorted(names[i] for i in left)
         raise InputError(f"parameter definitions depend on each other in a cycle: {', '.join(cycle)}")
     return tuple((i, expressions[i]) for i in order)
 
