@@ -522,22 +522,16 @@ class NumericModel:
         This model is not changed (so a model can be shared by threads or sent to
         workers while variants are made from it).
 
-        Raises
-        ------
-        InputError
-            As the constructor: an unknown name, a value that is not a finite number, or
-            (ModelError) a body that is not physical, e.g. a negative mass.
+        Raises the constructor's errors: InputError for an unknown name or a value that is not
+        a finite number, ModelError for a body that is not physical (e.g. a negative mass).
 
         Returns
         -------
         NumericModel
         """
-        given = {**(values or {}), **by_name}
-        index = {name: i for i, name in enumerate(self.parameter_names)}
-        names = (self.parameter_names[i] for i in name_indices(list(given), index, "parameter(s)"))
         variant = object.__new__(NumericModel)  # not copy.copy: that would pickle (and rebuild) the code
         variant.__dict__.update(self.__dict__)
-        variant._use(self._parameters.changed(self.equations, dict(zip(names, given.values()))))
+        variant._use(self._parameters.changed(self.equations, {**(values or {}), **by_name}))
         variant._parameters.check(self.equations.system)
         variant._warned_redundant = False
         return variant

@@ -84,10 +84,12 @@ class ParameterValues:
             constants[i] = _defined_value(names[i], expression, index, constants)
         return cls(names, constants, tuple(time_varying), definitions)
 
-    def changed(self, equations: Equations, given: Mapping[str, object]) -> ParameterValues:
-        """These values with those of ``given`` (by name) replaced; the definitions not given are
-        computed again from the new values, a definition given a value is dropped."""
-        return ParameterValues.resolve(equations, {**self.specification(), **given})
+    def changed(self, equations: Equations, given: Mapping) -> ParameterValues:
+        """These values with those of ``given`` (by name or symbol) replaced; the definitions not given
+        are computed again from the new values, a definition given a value is dropped."""
+        index = {name: i for i, name in enumerate(self.names)}
+        names = [self.names[i] for i in name_indices(list(given), index, "parameter(s)")]
+        return ParameterValues.resolve(equations, {**self.specification(), **dict(zip(names, given.values()))})
 
     def specification(self) -> dict[str, float | Callable | sp.Expr]:
         """What rebuilds these values (:meth:`resolve`): :meth:`as_dict` with every defined parameter
