@@ -18,6 +18,7 @@ import hashlib
 import itertools
 import math
 import pickle
+import signal
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -375,6 +376,13 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
     return SweepResult._of(cases, results, keep_trajectories)
 
 
+def _leave_ctrl_c_to_the_caller() -> None:
+    """Run in each worker of the sweep's own cluster: ignore SIGINT, which a terminal sends to every process
+    of the group, so that Ctrl-C reaches only the calling process (it keeps the finished rows and closes
+    the cluster) and the workers print no tracebacks of their own."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _run_distributed(source, cases, settings, client, workers, batch_size, retries, finished) -> None:
     try:
         import cloudpickle
@@ -386,6 +394,7 @@ def _run_distributed(source, cases, settings, client, workers, batch_size, retri
     if client is None:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
         owned = client = Client(cluster)
+        client.run(_leave_ctrl_c_to_the_caller)
     try:
         payload = cloudpickle.dumps(source)  # carries lambdas: factories, time-varying parameters
         token = hashlib.sha256(payload).hexdigest()
