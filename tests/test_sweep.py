@@ -100,7 +100,7 @@ def test_cli_sweep_writes_the_table_and_fails_on_failed_cases(tmp_path, capsys):
     import pandas as pd
 
     frame = pd.read_csv(table)
-    assert list(frame["m3"]) == [2.0, 3.0, 4.0] and set(frame["status"]) == {"ok"}
+    assert list(frame["m3 [kg]"]) == [2.0, 3.0, 4.0] and set(frame["status"]) == {"ok"}
     assert main(["sweep", "four_bar", "--grid", "l2=0.6,0.05", "--t-end", "0.5", "--workers", "0"]) == 1
     assert "case 1: error: AssemblyError" in capsys.readouterr().err
     assert main(["sweep", "four_bar", "--grid", "m3=2:4"]) == 2

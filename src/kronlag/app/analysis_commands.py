@@ -5,21 +5,24 @@ by :func:`kronlag.app.cli.build_parser`; thin shells over :mod:`kronlag.studies.
 from __future__ import annotations
 
 import argparse
+import csv
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
 
 from ..core.errors import ModelError
 from ..model.builtin import resolve_model
+from ..model.modelfile import ModelFile
+from ..model.modelfile.units import si_unit
 from ..numeric.reactions import column_unit, multiplier_labels, reaction_columns
 from ..numeric.tolerances import ZERO_EIGENVALUE_RTOL
 from ..studies.linearization import LinearModel
-from ..studies.sweeps import sweep
+from ..studies.sweeps import SweepInterrupted, SweepResult, sweep
 from .commands import method_help
-from .outputs import IncompleteRun
-from .workflows import numeric_model
+from .outputs import IncompleteRun, _check_writable
+from .workflows import model_units, numeric_model
 
 
 def _assignment(text: str) -> tuple[str, float]:
@@ -88,8 +91,9 @@ def modes_report(linear: LinearModel) -> str:
     return "\n".join(lines)
 
 
-def _axis(text: str) -> tuple[str, np.ndarray]:
-    """``"m2=1:3:5"`` -> ``("m2", linspace(1, 3, 5))``; ``"m2=1,2.5"`` -> the listed values."""
+def _axis(text: str) -> tuple[str, tuple[str, str, int] | list[str]]:
+    """``"m2=1:3:5"`` -> ``("m2", ("1", "3", 5))``; ``"m2=1,2.5"`` -> ``("m2", ["1", "2.5"])``: the values
+    as text, read in the model file's units (:meth:`ModelFile.parameter_value`) once the model is known."""
     name, separator, values = text.partition("=")
     try:
         if not separator or not name.strip():
@@ -98,35 +102,110 @@ def _axis(text: str) -> tuple[str, np.ndarray]:
             start, stop, count = values.split(":")
             if int(count) < 1:
                 raise ValueError
-            return name.strip(), np.linspace(float(start), float(stop), int(count))
-        return name.strip(), np.array([float(value) for value in values.split(",")])
+            return name.strip(), (start, stop, int(count))
+        return name.strip(), values.split(",")
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected NAME=START:STOP:COUNT or NAME=V1,V2,..., got {text!r}") from None
 
 
-def _sweep(arguments: argparse.Namespace) -> None:
+def _setting(text: str) -> tuple[str, str]:
+    """``"L=0.3m"`` -> ``("L", "0.3m")`` (read in the model file's units once the model is known)."""
+    name, separator, value = text.partition("=")
+    if not separator or not name.strip() or not value.strip():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE (VALUE a number, optionally with a unit), got {text!r}")
+    return name.strip(), value
 
-    if arguments.output and Path(arguments.output).suffix not in (".csv", ".parquet"):
-        raise ModelError(f"--output {arguments.output}: the file name must end in .csv or .parquet")
+
+def _axis_values(model: ModelFile, name: str, values: tuple[str, str, int] | list[str]) -> np.ndarray:
+    """The SI values of a ``--grid`` axis (each text in the file's unit of ``name`` or its own unit)."""
+    if isinstance(values, tuple):
+        start, stop, count = values
+        return np.linspace(model.parameter_value(name, start), model.parameter_value(name, stop), count)
+    return np.array([model.parameter_value(name, value) for value in values])
+
+
+def _column_labels(model: ModelFile, names: list[str]) -> dict[str, str]:
+    """``name -> "name [unit]"`` for the swept names whose unit the file determines (parameters with a
+    unit, coordinates by :func:`model_units`, their speeds per second); the others keep their name.  The
+    values are SI: a parameter's label is the file's unit when it is an SI one (``N*m``), else the SI unit."""
+    units = {**model_units(model), **model.units}
+    units |= {name: text for name, text in model.file_units.items() if si_unit(text)[0].magnitude == 1}
+    coordinates = {q.name for q in model.system.coordinates}
+    speeds = {f"{q}d": f"{units[q]}/{units['t']}" for q in coordinates if q in units and "t" in units}
+    units |= speeds
+    return {name: f"{name} [{units[name]}]" for name in names if units.get(name)}
+
+
+class _RowFile:
+    """The rows of a sweep appended to a CSV file as the cases finish (the file rewritten when a row brings
+    new columns, e.g. the outcomes after failed cases), so that a stopped sweep keeps them."""
+
+    def __init__(self, path: Path, labels: Mapping[str, str]):
+        self.path, self.labels, self.rows, self.columns = path, labels, [], []
+
+    def __call__(self, row: dict) -> None:
+        self.rows.append(row)
+        new = [column for column in row if column not in self.columns]
+        self.columns += new
+        self._write(self.rows if new else [row], "w" if new else "a")
+
+    def _write(self, rows: list[dict], mode: str) -> None:
+        with open(self.path, mode, newline="", encoding="utf-8") as file:
+            writer = csv.DictWriter(file, self.columns)
+            if mode == "w":
+                writer.writerow({column: self.labels.get(column, column) for column in self.columns})
+            writer.writerows(rows)
+
+
+def _save_table(result: SweepResult, path: Path, labels: Mapping[str, str]) -> None:
+    """The table in the order of the cases, its swept columns labelled with their units."""
+    table = result.table.rename(columns=labels)
+    if path.suffix == ".csv":
+        table.to_csv(path, index=False)
+    else:
+        table.to_parquet(path)
+    print(f"wrote {path}")
+
+
+def _sweep(arguments: argparse.Namespace) -> None:
+    output = Path(arguments.output) if arguments.output else None
+    if output:  # before any work: a sweep must not end with nowhere to put its table
+        if output.suffix not in (".csv", ".parquet"):
+            raise ModelError(f"--output {output}: the file name must end in .csv or .parquet")
+        _check_writable(output, "--output")
     model = resolve_model(arguments.model)
-    numeric = numeric_model(model)
+    grid = {name: _axis_values(model, name, values) for name, values in arguments.grid}
+    settings = {name: model.parameter_value(name, value) for name, value in arguments.set or ()}
+    both = sorted(settings.keys() & grid.keys())
+    if both:
+        raise ModelError(f"--set and --grid both give {', '.join(both)}")
+    numeric = numeric_model(model).with_parameters(settings)
     t_end = arguments.t_end if arguments.t_end is not None else model.simulation.t_end
     options = {"method": arguments.method or model.simulation.method, "rtol": model.simulation.rtol,
                "atol": model.simulation.atol, "t_eval": np.linspace(0.0, t_end, arguments.points)}
-    result = sweep(numeric, parameters=dict(arguments.grid), initial_states=model.guess_vectors(),
-                   fixed=model.fixed, qd_fixed=model.qd_fixed, t_span=(0.0, t_end), workers=arguments.workers,
-                   progress=True, **options)
+    labels = _column_labels(model, list(grid))
+    # the rows as they finish: in the output itself (CSV), else next to it until the table is written
+    rows = output if output is None or output.suffix == ".csv" else output.with_name(output.name + ".partial.csv")
+    try:
+        result = sweep(numeric, parameters=grid, initial_states=model.guess_vectors(), fixed=model.fixed,
+                       qd_fixed=model.qd_fixed, t_span=(0.0, t_end), workers=arguments.workers, progress=True,
+                       on_row=_RowFile(rows, labels) if rows else None, **options)
+    except SweepInterrupted as stop:
+        if output:
+            _save_table(stop.partial, output, labels)
+        if rows and rows != output:
+            rows.unlink(missing_ok=True)
+        raise KeyboardInterrupt(f"{stop}" + (f"; the finished cases are saved in {output}" if output else "")
+                                ) from None
     table = result.table
     print(f"{len(table)} cases, {int((table['status'] == 'ok').sum())} ok, "
           f"{len(result.failed)} not; median wall time per case {table['wall_time'].median():.3g} s")
-    print(table.drop(columns=["message"]).to_string(max_rows=20, float_format=lambda x: f"{x:.6g}"))
-    if arguments.output:
-        path = Path(arguments.output)
-        if path.suffix == ".csv":
-            table.to_csv(path, index=False)
-        else:
-            table.to_parquet(path)
-        print(f"wrote {path}")
+    print(table.rename(columns=labels).drop(columns=["message"]).to_string(
+        max_rows=20, float_format=lambda x: f"{x:.6g}"))
+    if output:
+        _save_table(result, output, labels)
+        if rows != output:
+            rows.unlink(missing_ok=True)
     if len(result.failed):
         for row in result.failed.itertuples():
             print(f"case {row.case}: {row.status}: {row.message}", file=sys.stderr)
@@ -149,10 +228,16 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
     sub = command("sweep", _sweep, "simulate a grid of parameter values and initial coordinates/speeds (Dask)")
     sub.add_argument("--grid", action="append", type=_axis, required=True, metavar="NAME=START:STOP:COUNT",
                      help="values of a parameter, coordinate (q1) or speed (q1d): evenly spaced, or "
-                          "NAME=V1,V2,...; repeat for a grid of all combinations")
+                          "NAME=V1,V2,...; in the model file's unit of NAME or with a unit of the same "
+                          "dimension (l1=100mm:300mm:5); repeat for a grid of all combinations")
+    sub.add_argument("--set", action="append", type=_setting, metavar="NAME=VALUE",
+                     help="a parameter's value in every case, in the file's unit or with a unit (L=0.3m); "
+                          "parameters the file defines from it are computed again; repeatable")
     sub.add_argument("--t-end", type=float, help="final time (default: the model's [simulation] t_end)")
     sub.add_argument("--method", help=method_help())
     sub.add_argument("--points", type=int, default=101, help="output times per case (default: 101)")
     sub.add_argument("--workers", type=int, default=2,
                      help="processes of the local Dask cluster; 0: run in this process (default: 2)")
-    sub.add_argument("--output", metavar="FILE", help="save the table of outcomes (.csv or .parquet)")
+    sub.add_argument("--output", metavar="FILE",
+                     help="save the table of outcomes (.csv or .parquet; checked before the first case, rows "
+                          "appended as cases finish, kept on Ctrl-C); swept columns are labelled 'NAME [unit]'")

@@ -6,8 +6,8 @@ lists them) or the path of a TOML model file (format: :mod:`kronlag.modelfile`).
 Exit status: 0 success; 2 bad input, found before any computation (one line
 on stderr, no traceback); 1 the run did not complete: a numerical failure or an
 output that could not be written (the other outputs are written, and what was
-computed is saved; stderr says where); 130 interrupted by Ctrl-C (what was
-computed is saved as well).
+computed is saved; stderr says where); 130 interrupted (Ctrl-C; what finished is
+saved, stderr says where).
 
 The exit status follows the class of what went wrong (:data:`EXIT_CODES`, the hierarchy of
 :mod:`kronlag.core.errors`): bad input (:class:`~kronlag.core.errors.InputError`, an unreadable
@@ -45,6 +45,7 @@ EXIT_CODES: tuple[tuple[type[BaseException], int, str], ...] = (
     (CompilerError, EXIT_INCOMPLETE, "compiled code: "),
     (InputError, EXIT_BAD_INPUT, "error: "),
     (OSError, EXIT_BAD_INPUT, "error: "),
+    (KeyboardInterrupt, EXIT_INTERRUPTED, "interrupted: "),
 )
 
 
@@ -100,11 +101,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_OK
     except tuple(kind for kind, _, _ in EXIT_CODES) as error:
         status, prefix = next((status, prefix) for kind, status, prefix in EXIT_CODES if isinstance(error, kind))
-        print(f"kronlag: {prefix}{error}", file=sys.stderr)
+        print(f"kronlag: {prefix}{error}" if str(error) else f"kronlag: {prefix.removesuffix(': ')}", file=sys.stderr)
         return status
-    except KeyboardInterrupt:  # Ctrl-C where no partial result is kept (a simulation's: RunInterrupted)
-        print("kronlag: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
     return EXIT_OK
 
 

@@ -172,9 +172,10 @@ def check_model(model: ModelFile, *, equations: Equations | None = None) -> Mode
 
 
 def numeric_model(model: ModelFile, *, equations: Equations | None = None) -> NumericModel:
-    """``derive(model.system).numeric(values)`` with the file's parameter values."""
+    """``derive(model.system).numeric(model.values)``: the file's parameter values, those written as
+    expressions of others kept as definitions (computed again by ``with_parameters``)."""
     eom = equations if equations is not None else derive(model.system)
-    return eom.numeric(model.numeric_values())
+    return eom.numeric(model.values)
 
 
 def initial_state(model: ModelFile, numeric: NumericModel) -> tuple[np.ndarray, np.ndarray]:
@@ -351,7 +352,7 @@ def parse_drive(text: str, model: ModelFile) -> tuple[str, PrescribedMotion]:
 def driven_model(model: ModelFile, drives: Mapping[str, PrescribedMotion]) -> NumericModel:
     """The numeric model of ``model`` with ``drives`` (by name) added as rheonomic constraints
     (:meth:`kronlag.System.add_drive`)."""
-    return derive(dataclasses.replace(model, drives=dict(drives)).driven().system).numeric(model.numeric_values())
+    return derive(dataclasses.replace(model, drives=dict(drives)).driven().system).numeric(model.values)
 
 
 def kinematics_along(model: ModelFile, drives: Mapping[str, PrescribedMotion],

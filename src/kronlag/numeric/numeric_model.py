@@ -27,7 +27,6 @@ import numpy as np
 import sympy as sp
 
 from ..core.errors import InputError, NumericalError, RedundantConstraintsWarning, SingularConfigurationError
-from ..model.bodies import check_parameter_values
 from ..model.symbols import name_indices
 from ..symbolic import matrices as catalogue
 from . import codegen
@@ -72,7 +71,9 @@ class NumericModel:
     ----------
     equations : Equations
     parameters : mapping
-        Value (float or callable of ``t``) of every parameter, keyed by name or symbol.
+        Value of every parameter, keyed by name or symbol: a float, a callable of ``t``, or a
+        SymPy expression of other parameters (a definition such as ``m1*l1**2/12``, as in
+        ``ModelFile.values``), computed from their values and again by :meth:`with_parameters`.
     backend : {"auto", "c", "python"}
         ``"c"``: generated C, compiled; ``"python"``: generated Python (NumPy-vectorised
         over batches), no compiler needed; ``"auto"``: ``"c"`` when a C compiler is
@@ -115,8 +116,7 @@ class NumericModel:
         self._coordinate_index = {name: i for i, name in enumerate(self.coordinate_names)}
         self.parameter_names = tuple(p.name for p in equations.parameters)
         self._use(ParameterValues.resolve(equations, parameters))
-        check_parameter_values(equations.system, dict(zip(self.parameter_names, self.parameter_vector(0.0))))
-        self._parameters.check_finite()
+        self._parameters.check(equations.system)
         self._source = codegen.KernelSource(equations)
         self._libraries: dict[str, codegen.KernelLibrary] = {}
         self._evaluators: dict[str, Callable[..., np.ndarray]] = {}
@@ -519,31 +519,37 @@ class NumericModel:
     # -- parameters of a built model, pickling ------------------------------------------------------
 
     def parameter_values(self) -> dict[str, float | Callable]:
-        """The parameter values by name: floats, and the callables ``f(t)`` of time-varying ones."""
+        """The parameter values by name: floats (those of defined parameters computed), and the
+        callables ``f(t)`` of time-varying ones."""
         return self._parameters.as_dict()
+
+    def parameter_definitions(self) -> dict[str, sp.Expr]:
+        """The parameters defined by an expression of others (``{"I1": m1*l1**2/12}``), in the order
+        of their dependencies; :meth:`with_parameters` computes them again."""
+        return self._parameters.definitions_by_name()
 
     def with_parameters(self, values: Mapping | None = None, **by_name) -> NumericModel:
         """A model with some parameter values changed, sharing this one's generated and compiled code.
 
         The equations are not derived, generated nor compiled again: the parameters
         are an input of every kernel.  ``values`` (keyed by name or symbol) and
-        keyword arguments are merged; the other parameters keep their values.
+        keyword arguments are merged; the other parameters keep their values, and
+        the defined ones (:meth:`parameter_definitions`) not given are computed again
+        from the new values (a defined parameter given a value keeps that value).
         This model is not changed (so a model can be shared by threads or sent to
         workers while variants are made from it).
+
+        Raises the constructor's errors: InputError for an unknown name or a value that is not
+        a finite number, ModelError for a body that is not physical (e.g. a negative mass).
 
         Returns
         -------
         NumericModel
         """
-        changed = self.parameter_values()
-        given = {**(values or {}), **by_name}
-        index = {name: i for i, name in enumerate(self.parameter_names)}
-        for key, name in zip(given, (self.parameter_names[i] for i in name_indices(list(given), index, "parameter(s)"))):
-            changed[name] = given[key]
         variant = object.__new__(NumericModel)  # not copy.copy: that would pickle (and rebuild) the code
         variant.__dict__.update(self.__dict__)
-        variant._use(ParameterValues.resolve(self.equations, changed))
-        variant._parameters.check_finite()
+        variant._use(self._parameters.changed(self.equations, {**(values or {}), **by_name}))
+        variant._parameters.check(self.equations.system)
         variant._warned_redundant = False
         return variant
 
@@ -555,7 +561,7 @@ class NumericModel:
         (:func:`kronlag.numeric.codegen.cache_directory`), compiling it only when absent.
         Time-varying parameters must be picklable callables (or use cloudpickle).
         """
-        return {"equations": self.equations, "parameters": self.parameter_values(), "backend": self.backend,
+        return {"equations": self.equations, "parameters": self._parameters.specification(), "backend": self.backend,
                 "rank_rtol": self.rank_rtol}
 
     def __setstate__(self, state: dict) -> None:

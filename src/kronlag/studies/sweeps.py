@@ -8,6 +8,8 @@ per case.  The model is built once: each worker unpickles it once and makes
 every case with :meth:`~kronlag.numeric.NumericModel.with_parameters` (no code
 generated or compiled per case).  A case that fails keeps its row, with its
 status and message; a task lost with a dying worker is run again elsewhere.
+Rows are handed to ``on_row`` as cases finish, and a sweep stopped by Ctrl-C
+raises :class:`SweepInterrupted` carrying the finished rows.
 """
 
 from __future__ import annotations
@@ -16,9 +18,10 @@ import hashlib
 import itertools
 import math
 import pickle
+import signal
 import sys
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -33,7 +36,7 @@ if TYPE_CHECKING:
 
     from ..simulation.trajectory import Trajectory
 
-__all__ = ["sweep", "SweepResult", "grid", "DEFAULT_OUTCOMES"]
+__all__ = ["sweep", "SweepResult", "SweepInterrupted", "grid", "DEFAULT_OUTCOMES"]
 
 
 def _final_coordinates(trajectory: Trajectory) -> dict[str, float]:
@@ -41,8 +44,10 @@ def _final_coordinates(trajectory: Trajectory) -> dict[str, float]:
 
 
 def _energy_drift(trajectory: Trajectory) -> float:
-    energy = trajectory.kinetic_energy + trajectory.potential_energy
-    return float(np.max(np.abs(energy - energy[0])))
+    """``max |E(t) - E(0) - W(t)|``: the energy balance with the work ``W`` of non-conservative forces,
+    dampers and drives (:attr:`Trajectory.energy_balance`), as ``kronlag simulate`` reports it."""
+    balance = trajectory.energy_balance
+    return float(np.max(np.abs(balance))) if balance.size else 0.0
 
 
 def _max_position_residual(trajectory: Trajectory) -> float:
@@ -51,7 +56,8 @@ def _max_position_residual(trajectory: Trajectory) -> float:
 
 
 #: Outcomes recorded when none are given: ``name -> f(trajectory)``; a function returning a
-#: dict contributes one column per key.
+#: dict contributes one column per key.  ``energy_drift`` is the energy balance
+#: ``max |E(t) - E(0) - W(t)|``, zero up to the integration error also for driven and damped models.
 DEFAULT_OUTCOMES: dict[str, Callable] = {
     "final": _final_coordinates,
     "energy_drift": _energy_drift,
@@ -96,6 +102,20 @@ class SweepResult:
         """The rows whose status is not ``"ok"``."""
         return self.table[self.table["status"] != _STATUS_OK]
 
+    @classmethod
+    def _of(cls, cases: list[dict], results: Mapping[int, tuple[dict, Trajectory | None]],
+            keep_trajectories: bool) -> SweepResult:
+        """The result of the finished cases (``results`` by case index), in the order of the cases."""
+        import pandas as pd
+
+        rows = [_row(index, cases[index], results[index][0]) for index in sorted(results)]
+        leading = ["case", *dict.fromkeys(name for case in cases for name in case), "status", "message"]
+        table = pd.DataFrame(rows, columns=None if rows else leading)
+        table = table[leading + [column for column in table.columns if column not in leading]]
+        trajectories = ({index: trajectory for index, (_, trajectory) in results.items() if trajectory is not None}
+                        if keep_trajectories else None)
+        return cls(table, trajectories)
+
     def to_xarray(self):
         """The kept trajectories as an :class:`xarray.Dataset` with dimensions ``case``, ``time``,
         ``coordinate`` (variables ``q``, ``qd``; the cases' scalar columns as coordinates of
@@ -117,6 +137,20 @@ class SweepResult:
              "qd": (("case", "time", "coordinate"), np.stack([self.trajectories[c].qd for c in cases]))},
             coords={"case": cases, "time": first.t, "coordinate": list(first.coordinate_names),
                     **{column: ("case", rows[column].to_numpy()) for column in rows.columns}})
+
+
+class SweepInterrupted(KeyboardInterrupt):
+    """Ctrl-C (KeyboardInterrupt) stopped a :func:`sweep`; ``partial`` is the :class:`SweepResult` of
+    the cases that finished (``except KeyboardInterrupt as stop: stop.partial``)."""
+
+    def __init__(self, partial: SweepResult, total: int):
+        super().__init__(f"sweep interrupted after {len(partial.table)} of {total} cases")
+        self.partial = partial
+
+
+def _row(index: int, values: Mapping[str, float], row: Mapping[str, Any]) -> dict[str, Any]:
+    """A row of the table: the case's index, its swept values, then what the run gave."""
+    return {"case": index, **values, **row}
 
 
 # -- one case, in a worker ----------------------------------------------------------------------------
@@ -192,6 +226,26 @@ def _run_batch(token: str, payload: bytes, cases: list[tuple[int, dict]], settin
 # -- the sweep ------------------------------------------------------------------------------------------
 
 
+def _batches(cases: Iterable[dict], size: int) -> Iterator[list[tuple[int, dict]]]:
+    """``(index, case)`` in consecutive batches of ``size`` (one pass over the cases)."""
+    batch: list[tuple[int, dict]] = []
+    for item in enumerate(cases):
+        batch.append(item)
+        if len(batch) == size:
+            yield batch
+            batch = []
+    if batch:
+        yield batch
+
+
+def _check_options(workers, batch_size, retries) -> None:
+    """InputError for a negative number of workers or retries or a batch size below 1."""
+    for name, value, least in (("workers", workers, 0), ("retries", retries, 0),
+                               ("batch_size", 1 if batch_size is None else batch_size, 1)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
+            raise InputError(f"{name} must be an integer >= {least}, got {value!r}")
+
+
 def _cases(parameters) -> list[dict[str, float]]:
     """Cases from a grid (mapping name -> values), a list of dicts, or a DataFrame (one case a row)."""
     if isinstance(parameters, Mapping):
@@ -239,7 +293,7 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
           client=None, workers: int = 2, fixed: Iterable[str] = (), qd_fixed: Iterable[str] = (),
           assemble: bool = True, keep_trajectories: bool = False, batch_size: int | None = None,
           retries: int = 3, progress: bool | Callable[[int, int], None] = True,
-          **simulate_options) -> SweepResult:
+          on_row: Callable[[dict], None] | None = None, **simulate_options) -> SweepResult:
     """Simulate every case of a grid or sample of parameter values and initial states.
 
     Parameters
@@ -259,23 +313,27 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
     t_span : (t0, t1)
     outcomes : mapping name -> callable(Trajectory), optional
         Scalar outcomes (a callable may return a dict: one column per key);
-        :data:`DEFAULT_OUTCOMES` (final coordinates, energy drift, constraint
-        residual) when omitted.  Must be picklable (cloudpickle: lambdas are).
+        :data:`DEFAULT_OUTCOMES` (final coordinates, energy drift: the energy
+        balance ``max |E - E(0) - W|``, constraint residual) when omitted.  Must be picklable
+        (cloudpickle: lambdas are).
     client : dask.distributed.Client, optional
         Where to run.  None: a local cluster of ``workers`` processes (one thread
         each), closed at the end.
     workers : int
-        Processes of the local cluster; 0 runs every case in this process (no Dask).
+        Processes of the local cluster (>= 0); 0 runs every case in this process (no Dask).
     fixed, qd_fixed : coordinate names held while assembling every case.
     assemble : bool
         False: use ``initial_states`` as given (already consistent) when nothing is held.
     keep_trajectories : bool
         Also gather every trajectory (memory!); see :meth:`SweepResult.to_xarray`.
     batch_size : int, optional
-        Cases per task (default: about 8 tasks per worker).  A task lost with its
+        Cases per task, >= 1 (default: about 8 tasks per worker).  A task lost with its
         worker is run again; ``retries`` more times when it raises.
     progress : bool or callable ``f(done, total)``
         True: a bar on standard error when it is a terminal.
+    on_row : callable ``f(row: dict)``, optional
+        Called in this process with each row of the table as its case finishes (in the
+        order they finish), e.g. to append it to a file.
     **simulate_options
         Passed to :func:`kronlag.simulate` (``method``, ``rtol``, ``atol``, ``t_eval``, ...).
 
@@ -283,9 +341,16 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
     -------
     SweepResult
         ``table`` (a DataFrame, one row per case), ``trajectories``, ``failed``.
-    """
-    import pandas as pd
 
+    Raises
+    ------
+    InputError
+        Unknown swept names, ``workers`` or ``retries`` < 0, ``batch_size`` < 1.
+    SweepInterrupted
+        Ctrl-C (a KeyboardInterrupt) stopped the sweep; its ``partial`` is the
+        :class:`SweepResult` of the cases that finished.
+    """
+    _check_options(workers, batch_size, retries)
     cases = _cases(parameters)
     _check_names(model_or_factory, cases)
     settings = {"t_span": tuple(t_span), "initial_states": initial_states, "fixed": set(fixed),
@@ -293,25 +358,32 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
                 "keep_trajectories": keep_trajectories, "simulate": simulate_options}
     report = progress if callable(progress) else _TextProgress(len(cases)) if progress else (lambda done, total: None)
     results: dict[int, tuple[dict, Trajectory | None]] = {}
-    if client is None and workers == 0:
-        for index, values in enumerate(cases):
-            results[index] = _run_case(model_or_factory, values, settings)
-            report(len(results), len(cases))
-    else:
-        _run_distributed(model_or_factory, cases, settings, client, workers, batch_size, retries, report, results)
-    rows = []
-    for index, values in enumerate(cases):
-        row, _ = results[index]
-        rows.append({"case": index, **values, **row})
-    table = pd.DataFrame(rows)
-    leading = ["case", *dict.fromkeys(name for case in cases for name in case), "status", "message"]
-    table = table[leading + [column for column in table.columns if column not in leading]]
-    trajectories = ({index: trajectory for index, (_, trajectory) in results.items() if trajectory is not None}
-                    if keep_trajectories else None)
-    return SweepResult(table, trajectories)
+
+    def finished(index: int, row: dict, trajectory: Trajectory | None) -> None:
+        results[index] = (row, trajectory)
+        if on_row is not None:
+            on_row(_row(index, cases[index], row))
+        report(len(results), len(cases))
+
+    try:
+        if client is None and workers == 0:
+            for index, values in enumerate(cases):
+                finished(index, *_run_case(model_or_factory, values, settings))
+        else:
+            _run_distributed(model_or_factory, cases, settings, client, workers, batch_size, retries, finished)
+    except KeyboardInterrupt:
+        raise SweepInterrupted(SweepResult._of(cases, results, keep_trajectories), len(cases)) from None
+    return SweepResult._of(cases, results, keep_trajectories)
 
 
-def _run_distributed(source, cases, settings, client, workers, batch_size, retries, report, results) -> None:
+def _leave_ctrl_c_to_the_caller() -> None:
+    """Run in each worker of the sweep's own cluster: ignore SIGINT, which a terminal sends to every process
+    of the group, so that Ctrl-C reaches only the calling process (it keeps the finished rows and closes
+    the cluster) and the workers print no tracebacks of their own."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _run_distributed(source, cases, settings, client, workers, batch_size, retries, finished) -> None:
     try:
         import cloudpickle
         from dask.distributed import Client, LocalCluster, as_completed
@@ -322,25 +394,24 @@ def _run_distributed(source, cases, settings, client, workers, batch_size, retri
     if client is None:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
         owned = client = Client(cluster)
+        client.run(_leave_ctrl_c_to_the_caller)
     try:
         payload = cloudpickle.dumps(source)  # carries lambdas: factories, time-varying parameters
         token = hashlib.sha256(payload).hexdigest()
         settings_payload = cloudpickle.dumps(settings)
         parallel = max(1, len(client.scheduler_info().get("workers", {})) or workers)
         size = batch_size or max(1, math.ceil(len(cases) / (8 * parallel)))
-        batches = [list(enumerate(cases))[start:start + size] for start in range(0, len(cases), size)]
         futures = {client.submit(_run_batch, token, payload, batch, settings_payload, pure=False,
-                                 retries=retries): batch for batch in batches}
+                                 retries=retries): batch for batch in _batches(cases, size)}
         for future in as_completed(futures):
             batch = futures[future]
             try:
-                for index, row, trajectory in future.result():
-                    results[index] = (row, trajectory)
+                ran = future.result()
             except Exception as error:  # the task itself was lost (its workers kept dying)
-                for index, _ in batch:
-                    results[index] = ({"status": _STATUS_LOST, "message": f"{type(error).__name__}: {error}",
-                                       "wall_time": float("nan")}, None)
-            report(len(results), len(cases))
+                ran = [(index, {"status": _STATUS_LOST, "message": f"{type(error).__name__}: {error}",
+                                "wall_time": float("nan")}, None) for index, _ in batch]
+            for index, row, trajectory in ran:
+                finished(index, row, trajectory)
     finally:
         if owned is not None:
             cluster = owned.cluster

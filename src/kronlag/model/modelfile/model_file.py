@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import re
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -13,6 +14,7 @@ import sympy as sp
 
 from ...core.errors import DrivesNotAppliedWarning, ModelError
 from ..system import System
+from .units import si_unit
 
 __all__ = ["ModelFile", "SimulationSettings", "PrescribedMotion", "to_float", "settle_drives"]
 
@@ -46,10 +48,15 @@ class ModelFile:
     description : str
     values : dict of str to sympy.Expr
         Parameter values as written: numbers, or expressions of other
-        parameters (``"m1*l1**2/12"``); see :meth:`numeric_values`.
+        parameters (``"m1*l1**2/12"``); see :meth:`numeric_values`.  Given to
+        ``Equations.numeric`` as they are, the expressions stay definitions that
+        ``NumericModel.with_parameters`` (and sweeps) compute again.
     units : dict of str to str
         SI units of the parameters (a file's units are parsed with ``pint`` and its values
         converted to SI base units: ``300`` in ``"mm"`` is stored as 0.3 in ``"m"``).
+    file_units : dict of str to str
+        The units as the file writes them (``"mm"``): values given later as text
+        (:meth:`parameter_value`, the command line's ``--set`` and ``--grid``) are read in them.
     q_guess, qd_guess : dict of str to sympy.Expr
         Assembly guesses by coordinate name (may use parameters); missing
         coordinates default to 0.
@@ -68,6 +75,7 @@ class ModelFile:
     description: str = ""
     values: dict[str, sp.Expr] = field(default_factory=dict)
     units: dict[str, str] = field(default_factory=dict)
+    file_units: dict[str, str] = field(default_factory=dict)
     q_guess: dict[str, sp.Expr] = field(default_factory=dict)
     fixed: tuple[str, ...] = ()
     qd_guess: dict[str, sp.Expr] = field(default_factory=dict)
@@ -118,6 +126,35 @@ class ModelFile:
             system.add_drive(drive.target, drive.motion, name=name)
         return dataclasses.replace(self, system=system, drives={})
 
+    def parameter_value(self, name: str, text: str) -> float:
+        """A value of ``name`` written as text (``--set``, ``--grid``), in the SI units of :attr:`values`.
+
+        A plain number is in the file's unit of the parameter (``"300"`` for a length the file
+        gives in ``"mm"`` is 0.3); a number followed by a unit (``"300mm"``, ``"0.3 m"``) is
+        converted from that unit, which must have the dimension of the file's.  A name without a
+        unit in the file (a coordinate, a speed, a parameter without ``unit``) takes a plain number.
+
+        Raises
+        ------
+        ModelError
+            Not a number, an unknown unit, a unit of another dimension, or a unit for a name
+            without one.
+        """
+        match = _NUMBER_AND_UNIT.fullmatch(text)
+        if not match:
+            raise ModelError(f"{name}={text}: expected a number, optionally followed by a unit (0.3, 300mm)")
+        number, unit = float(match[1]), match[2]
+        declared = self.file_units.get(name) or self.units.get(name)
+        if not unit:
+            return number * (_unit(name, declared).magnitude if declared else 1.0)
+        if not declared:
+            raise ModelError(f"{name}={text}: {name} has no unit in the model file; give a plain number")
+        one, own = _unit(name, unit), _unit(name, declared)
+        if one.dimensionality != own.dimensionality:
+            raise ModelError(f"{name}={text}: {unit!r} is not a unit of {name}, which the model file gives "
+                             f"in {declared!r} ({own.dimensionality})")
+        return number * one.magnitude
+
     def guess_vectors(self, *, values: Mapping[str, float] | None = None) -> tuple[list[float], list[float]]:
         """The assembly guesses ``(q, qd)`` as lists in coordinate order (0 where not given), with the
         parameter values ``values`` (default: :meth:`numeric_values`)."""
@@ -138,6 +175,18 @@ def settle_drives(model: ModelFile, apply_drives: bool | None) -> ModelFile:
                       "apply_drives=False takes the model without them and without this warning",
                       DrivesNotAppliedWarning, stacklevel=3)
     return model
+
+
+#: A number and an optional unit after it: ``"300mm"``, ``"-1.5e-3 kg*m^2"``.
+_NUMBER_AND_UNIT = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*")
+
+
+def _unit(name: str, text: str):
+    """One ``text`` in SI base units (a pint quantity); ModelError naming ``name`` for a bad unit."""
+    try:
+        return si_unit(text)[0]
+    except ValueError as error:
+        raise ModelError(f"{name}: {error}") from None
 
 
 def to_float(expression, values: Mapping[str, float], what: str) -> float:

@@ -201,7 +201,7 @@ def _read(document: dict, source: str) -> ModelFile:
         raise reader.error("parameters", f"expected a table, got {_kind(parameter_table)}")
     parameters = [sp.Symbol(reader.name(key, f"parameters.{key}")) for key in parameter_table]
     reader.symbols = {s.name: s for s in (*coordinates, *map(speed_symbol, coordinates), *parameters, t)}
-    values, units = _read_parameters(reader, parameter_table, {s.name: s for s in parameters})
+    values, units, file_units = _read_parameters(reader, parameter_table, {s.name: s for s in parameters})
     gravity = reader.vector(document["gravity"], "gravity", (2, 3)) if "gravity" in document else None
     with reader.entry("coordinates, parameters, gravity"):
         system = System(coordinates, parameters=parameters, gravity=gravity, name=name)
@@ -213,7 +213,8 @@ def _read(document: dict, source: str) -> ModelFile:
         reader.add_point(key, reader.vector(value, f"points.{key}", (2, 3)), f"points.{key}")
 
     _read_items(reader, system, document)
-    model = ModelFile(system=system, description=description, values=values, units=units, source=source)
+    model = ModelFile(system=system, description=description, values=values, units=units, file_units=file_units,
+                      source=source)
     _read_settings(reader, document, model)
     with reader.entry("parameters"):
         numbers = model.numeric_values()
@@ -225,12 +226,13 @@ def _read(document: dict, source: str) -> ModelFile:
 
 
 def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
-                     ) -> tuple[dict[str, sp.Expr], dict[str, str]]:
+                     ) -> tuple[dict[str, sp.Expr], dict[str, str], dict[str, str]]:
     """Values converted to SI base units (``300`` with unit ``"mm"`` is 0.3, unit ``"m"``;
     ``90 deg`` is pi/2 rad); the units returned are the SI ones, so that writing the file
-    back and reading it again gives the same numbers."""
+    back and reading it again gives the same numbers, and the units as written."""
     values: dict[str, sp.Expr] = {}
     units: dict[str, str] = {}
+    file_units: dict[str, str] = {}
     for key, item in table.items():
         entry = f"parameters.{key}"
         factor = None
@@ -241,7 +243,7 @@ def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
                     one, units[key] = si_unit(reader.string(item["unit"], f"{entry}.unit"))
                 except ValueError as error:
                     raise reader.error(f"{entry}.unit", str(error)) from None
-                factor = one.magnitude
+                factor, file_units[key] = one.magnitude, item["unit"]
             if "description" in item:
                 reader.string(item["description"], f"{entry}.description")
             if "value" not in item:
@@ -256,7 +258,7 @@ def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
                                           f"unit must be the SI unit {units[key]!r}")
             value = value * sp.Float(factor)
         values[key] = value
-    return values, units
+    return values, units, file_units
 
 
 def _body(reader: _Reader, entry: str, table: dict) -> Body:
