@@ -135,6 +135,11 @@ def test_huge_output_grid_is_one_line_and_exit_2_in_the_cli(arguments, expected)
     assert_one_line_error(run_cli("simulate", "double_pendulum", *arguments), expected)
 
 
+def test_huge_sweep_output_grid_is_one_line_and_exit_2_before_any_case():
+    result = run_cli("sweep", "double_pendulum", "--grid", "m1=1,2", "--workers", "0", "--points", "1000000000")
+    assert_one_line_error(result, f"--points 1000000000: more than the limit of {MAX_OUTPUT_POINTS}")
+
+
 def test_huge_t_eval_is_an_input_error():
     model = numeric("double_pendulum", "python")
     with pytest.raises(InputError, match=f"t_eval has {MAX_OUTPUT_POINTS + 1} output times, more than the limit"):

@@ -20,7 +20,7 @@ from ..numeric.reactions import column_unit, multiplier_labels, reaction_columns
 from ..numeric.tolerances import ZERO_EIGENVALUE_RTOL
 from ..studies.linearization import LinearModel
 from ..studies.sweeps import SweepInterrupted, SweepResult, sweep
-from .commands import method_help
+from .commands import method_help, output_times
 from .outputs import IncompleteRun, _check_writable
 from .workflows import model_units, numeric_model
 
@@ -182,7 +182,7 @@ def _sweep(arguments: argparse.Namespace) -> None:
     numeric = numeric_model(model).with_parameters(settings)
     t_end = arguments.t_end if arguments.t_end is not None else model.simulation.t_end
     options = {"method": arguments.method or model.simulation.method, "rtol": model.simulation.rtol,
-               "atol": model.simulation.atol, "t_eval": np.linspace(0.0, t_end, arguments.points)}
+               "atol": model.simulation.atol, "t_eval": output_times(t_end, points=arguments.points)}
     labels = _column_labels(model, list(grid))
     # the rows as they finish: in the output itself (CSV), else next to it until the table is written
     rows = output if output is None or output.suffix == ".csv" else output.with_name(output.name + ".partial.csv")

@@ -199,17 +199,23 @@ class ProgressBar:
             self.stream.flush()
 
 
-def _output_grid(t_end: float, arguments: argparse.Namespace, default_points: int) -> np.ndarray:
-    """Output times 0 .. t_end: every ``--dt``, or ``--points`` evenly spaced, or ``default_points``;
-    InputError for more than :data:`~kronlag.core.limits.MAX_OUTPUT_POINTS` (before allocating them)."""
-    if arguments.dt is not None:
-        if t_end / arguments.dt + 1 > MAX_OUTPUT_POINTS:
-            raise InputError(f"--dt {arguments.dt:g} gives {t_end / arguments.dt + 1:.3g} output times up to "
+def output_times(t_end: float, *, points: int | None = None, dt: float | None = None,
+                 default_points: int = 101) -> np.ndarray:
+    """Output times 0 .. t_end: every ``dt`` (``--dt``), or ``points`` (``--points``) evenly spaced, or
+    ``default_points``; InputError for a step or count that is not positive, or more than
+    :data:`~kronlag.core.limits.MAX_OUTPUT_POINTS` times (checked before allocating them)."""
+    if dt is not None:
+        if not dt > 0:
+            raise InputError(f"--dt {dt:g}: the output step must be positive")
+        if t_end / dt + 1 > MAX_OUTPUT_POINTS:
+            raise InputError(f"--dt {dt:g} gives {t_end / dt + 1:.3g} output times up to "
                              f"t = {t_end:g}, more than the limit of {MAX_OUTPUT_POINTS}: give a larger --dt")
-        return np.append(np.arange(0.0, t_end * (1 - 1e-12), arguments.dt), t_end)
-    if arguments.points is not None and arguments.points > MAX_OUTPUT_POINTS:
-        raise InputError(f"--points {arguments.points}: more than the limit of {MAX_OUTPUT_POINTS} output times")
-    return np.linspace(0.0, t_end, arguments.points or default_points)
+        return np.append(np.arange(0.0, t_end * (1 - 1e-12), dt), t_end)
+    if points is not None and points > MAX_OUTPUT_POINTS:
+        raise InputError(f"--points {points}: more than the limit of {MAX_OUTPUT_POINTS} output times")
+    if points is not None and points < 2:
+        raise InputError(f"--points {points}: give at least 2 output times (t = 0 and t_end)")
+    return np.linspace(0.0, t_end, points or default_points)
 
 
 def _default_points(t_end: float) -> int:
@@ -230,9 +236,10 @@ def _simulate(arguments: argparse.Namespace) -> None:
     t_end = arguments.t_end if arguments.t_end is not None else model.simulation.t_end
     bar = ProgressBar(t_end, sys.stderr)
     interrupted = False
+    t_eval = output_times(t_end, points=arguments.points, dt=arguments.dt, default_points=_default_points(t_end))
     try:
         trajectory = simulate_model(model, t_end=t_end, method=arguments.method, rtol=arguments.rtol,
-                                    atol=arguments.atol, t_eval=_output_grid(t_end, arguments, _default_points(t_end)),
+                                    atol=arguments.atol, t_eval=t_eval,
                                     max_steps=arguments.max_steps, progress=bar)
     except KeyboardInterrupt as interrupt:  # Ctrl-C: the partial run is written as a failed one is
         if not hasattr(interrupt, "trajectory"):
@@ -262,7 +269,7 @@ def _driven_run(arguments: argparse.Namespace, outputs_table, run_along, what: s
     outputs = requested_outputs(outputs_table, arguments, model)
     drives = _drives(arguments, model)
     t_end = model.simulation.t_end if arguments.t_end is None else arguments.t_end
-    run = run_along(model, drives, _output_grid(t_end, arguments, 101), **options)
+    run = run_along(model, drives, output_times(t_end, points=arguments.points, dt=arguments.dt), **options)
     print(run.report())
     failure = "" if run.success else f"{what} failed {run.message}"
     finish_run(run, outputs, arguments, model, failure=failure, save=run.to_csv,

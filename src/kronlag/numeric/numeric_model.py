@@ -519,8 +519,7 @@ class NumericModel:
     # -- parameters of a built model, pickling ------------------------------------------------------
 
     def parameter_values(self) -> dict[str, float | Callable]:
-        """The parameter values by name: floats (those of defined parameters computed), and the
-        callables ``f(t)`` of time-varying ones."""
+        """The parameter values by name: floats (defined ones computed), callables ``f(t)`` (time-varying)."""
         return self._parameters.as_dict()
 
     def parameter_definitions(self) -> dict[str, sp.Expr]:
@@ -531,13 +530,11 @@ class NumericModel:
     def with_parameters(self, values: Mapping | None = None, **by_name) -> NumericModel:
         """A model with some parameter values changed, sharing this one's generated and compiled code.
 
-        The equations are not derived, generated nor compiled again: the parameters
-        are an input of every kernel.  ``values`` (keyed by name or symbol) and
-        keyword arguments are merged; the other parameters keep their values, and
-        the defined ones (:meth:`parameter_definitions`) not given are computed again
-        from the new values (a defined parameter given a value keeps that value).
-        This model is not changed (so a model can be shared by threads or sent to
-        workers while variants are made from it).
+        The equations are not derived, generated nor compiled again: the parameters are an input of
+        every kernel.  ``values`` (keyed by name or symbol) and keyword arguments are merged; the other
+        parameters keep their values, and the defined ones (:meth:`parameter_definitions`) not given are
+        computed again from the new values (a defined parameter given a value keeps that value).  This
+        model is not changed (it can be shared by threads or sent to workers while variants are made).
 
         Raises the constructor's errors: InputError for an unknown name or a value that is not
         a finite number, ModelError for a body that is not physical (e.g. a negative mass).
@@ -556,10 +553,9 @@ class NumericModel:
     def __getstate__(self) -> dict:
         """Only what rebuilds the model: the equations, the parameter values and the backend.
 
-        The compiled libraries (ctypes handles) stay behind; the receiving process
-        generates the kernels again and loads the C library from the on-disk cache
-        (:func:`kronlag.numeric.codegen.cache_directory`), compiling it only when absent.
-        Time-varying parameters must be picklable callables (or use cloudpickle).
+        The compiled libraries (ctypes handles) stay behind; the receiving process generates the kernels
+        again and loads the C library from the on-disk cache (:func:`kronlag.numeric.codegen.cache_directory`),
+        compiling it only when absent.  Time-varying parameters must be picklable callables (or cloudpickle).
         """
         return {"equations": self.equations, "parameters": self._parameters.specification(), "backend": self.backend,
                 "rank_rtol": self.rank_rtol}
