@@ -22,7 +22,7 @@ import kronlag
 from kronlag.model.builtin import load_example
 from kronlag.numeric.reactions import joint_reaction
 
-robot = load_example("five_bar")
+robot = load_example("five_bar", apply_drives=False)
 values = robot.numeric_values()
 d, l1, l2 = values["d"], values["l1"], values["l2"]
 centre, radius, omega = (0.0, 0.35), 0.05, 2 * np.pi  # m, m, rad/s

@@ -13,7 +13,7 @@ equations = kronlag.derive(kronlag.models.four_bar()).simplify()
 for name in ("M", "C", "g", "Phi_q"):
     print(f"{name} =", getattr(equations, name))
 
-trajectory = simulate_model(load_example("four_bar"))
+trajectory = simulate_model(load_example("four_bar", apply_drives=False))
 print(summarize(trajectory).report())
 trajectory.plot(path="four_bar.png")
 trajectory.animate("four_bar.gif", fps=20)

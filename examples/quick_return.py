@@ -7,6 +7,6 @@ Run: ``python3 examples/quick_return.py``.
 from kronlag.app.workflows import simulate_model
 from kronlag.model.builtin import load_example
 
-trajectory = simulate_model(load_example("quick_return"))
+trajectory = simulate_model(load_example("quick_return", apply_drives=False))
 print(trajectory.message)
 trajectory.plot(path="quick_return.png")

@@ -21,7 +21,7 @@ from kronlag.numeric.reactions import joint_reaction
 engine = load_example("slider_crank_engine")
 omega = 1500 * 2 * np.pi / 60  # rad/s
 engine.system.add_drive("theta_crank", omega * kronlag.t)  # the crank turns at a constant speed
-model = kronlag.derive(engine.system).numeric(engine.numeric_values())
+model = kronlag.derive(engine.system).numeric(engine.values)
 times = np.linspace(0, 2 * np.pi / omega, 181)
 run = kronlag.inverse_dynamics(model, times, engine.guess_vectors()[0])  # drive torque: run.forces
 angle = np.degrees(omega * run.t)

@@ -217,7 +217,9 @@ def test_model_file_matches_the_python_model(code):
     """The shipped TOML file, read as data, gives the same equations and numbers."""
     benchmark = problem(code)
     model_file = load_model(example_path(FILES[code]))
-    assert model_file.numeric_values() == pytest.approx(dict(benchmark.parameters), rel=1e-15)
+    values = model_file.numeric_values()  # a file may name more quantities (A05's density)
+    assert {name: values[name] for name in dict(benchmark.parameters)} == pytest.approx(dict(benchmark.parameters),
+                                                                                     rel=1e-15)
     from_file = kronlag.derive(model_file.system).numeric(model_file.numeric_values())
     model = numeric(code)
     q_guess, qd_guess = model_file.guess_vectors()

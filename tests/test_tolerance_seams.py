@@ -26,6 +26,10 @@ RTOLS = (1e-4, 1e-6, 1e-8)
 ATOLS = (1e-6, 1e-8)
 
 
+#: The accuracy of B0 the A02 tests ask of the default method at the default tolerances (test_iftomm).
+A02_ACCURACY = 1e-5
+
+
 def a02_errors(n: int) -> dict[tuple[float, float], float]:
     case = benchmark("A02", n=n)
     model = case.numeric()
@@ -46,7 +50,10 @@ def test_a02_error_follows_the_tolerance(n):
     assert max(errors.values()) <= 1e-3, table
     for (rtol, atol), error in errors.items():
         looser = [errors[key] for key in ((rtol * 100, atol), (rtol, atol * 100)) if key in errors]
-        assert all(error <= 2 * other for other in looser), f"tighter is worse at rtol {rtol:g} atol {atol:g}: {table}"
+        # below the benchmark's accuracy the error is rounding amplified by the unstable passages,
+        # as likely to be smaller as larger at a looser tolerance
+        assert all(error <= max(2 * other, A02_ACCURACY) for other in looser), \
+            f"tighter is worse at rtol {rtol:g} atol {atol:g}: {table}"
 
 
 # -- redundant constraints --------------------------------------------------------------------

@@ -29,8 +29,8 @@ from kronlag.symbolic.interop import casadi_functions
 
 SWING, DURATION, INTERVALS, RK4_STEPS = 1.0, 1.5, 30, 4
 
-example = load_example("four_bar")
-model = kronlag.derive(example.system).numeric(example.numeric_values())
+example = load_example("four_bar", apply_drives=False)
+model = kronlag.derive(example.system).numeric(example.values)
 rest = model.equilibrium([-1.5, -0.5, -1.5])
 forward_dynamics = casadi_functions(model)["forward_dynamics"]
 m = model.m

@@ -70,26 +70,28 @@ MAX_PROJECTION_ITERATIONS = 8
 #: A Gauss-Newton step below ``STALL (1 + |q|)`` in every coordinate is at rounding level: ``Phi`` is as
 #: small as it gets, and the projection ends there.
 STALL = 1e-15
-#: The tightest ``rtol`` or ``atol`` handed to CVODE: about ``50 eps`` for states of size 1 (below
-#: it CVODE stops with "too much accuracy requested").
-CVODE_TIGHTEST = 1e-14
-#: The tightest ``rtol`` or ``atol`` handed to ALI3-P: its velocities ``2/h (q - q0) - v0`` carry the
+#: The tightest ``(rtol, atol)`` handed to CVODE: about ``50 eps`` for states of size 1 (below it
+#: CVODE stops with "too much accuracy requested").
+CVODE_TIGHTEST = (1e-14, 1e-14)
+#: The tightest ``(rtol, atol)`` handed to ALI3-P: its velocities ``2/h (q - q0) - v0`` carry the
 #: rounding of the positions' Newton iteration (``1e-13 (1 + |q|)``) amplified by ``2/h``, so a
-#: tighter tolerance only adds steps and makes the error larger (IFToMM A02: the error of B0 levels
-#: off at 1.5e-5 m with 3e-12, 4e-5 m with 1e-11, and grows again below 1e-12).
-INDEX3_TIGHTEST = 3e-12
+#: tighter tolerance only adds steps and makes the error larger.  IFToMM A02 (N = 2 and 4, the
+#: switching method, rtol 1e-6 to 1e-10): with an ``atol`` floor of 3e-12 the error of B0 levels off
+#: at 1.3-1.8e-5 m, with 3e-11 at 0.6-1.4e-5 m, with 1e-10 at 0.1-0.8e-5 m but IFToMM A04's energy
+#: drift at rtol = atol = 1e-10 grows from 2e-9 to 1.4e-8 of 5 m g L; ``rtol`` is floored at 3e-12.
+INDEX3_TIGHTEST = (3e-12, 3e-11)
 #: An eigenvalue ``w^2`` of a linearization at most this fraction of the problem's scale is zero
 #: within rounding (see the module docstring); rounding leaves ~1e-15 of it, a true mode far more.
 ZERO_EIGENVALUE_RTOL = 1e-9
 
 
-def integrator_tolerances(rtol: float, atol: float, scale: float, tightest: float) -> tuple[float, float]:
+def integrator_tolerances(rtol: float, atol: float, scale: float,
+                          tightest: tuple[float, float]) -> tuple[float, float]:
     """The ``(rtol, atol)`` given to an integrator whose global error exceeds its local tolerance by
     about ``scale``, for the requested ones: both divided by ``scale`` (their ratio, which says where
     absolute accuracy takes over from relative, is kept), neither below ``tightest``, the integrator's
-    rounding floor (:data:`CVODE_TIGHTEST`, :data:`INDEX3_TIGHTEST`)."""
-    return max(rtol / scale, tightest), max(atol / scale, tightest)
-
+    rounding floors ``(rtol, atol)`` (:data:`CVODE_TIGHTEST`, :data:`INDEX3_TIGHTEST`)."""
+    return max(rtol / scale, tightest[0]), max(atol / scale, tightest[1])
 
 
 def check_rank_rtol(rank_rtol: float) -> float:

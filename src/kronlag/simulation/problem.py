@@ -165,7 +165,7 @@ class SolverOptions:
         """Residual tolerance of the position projection: ``atol / 100``."""
         return self.atol / 100
 
-    def scaled(self, scale: float, tightest: float) -> SolverOptions:
+    def scaled(self, scale: float, tightest: tuple[float, float]) -> SolverOptions:
         """These options with ``rtol`` and ``atol`` both divided by ``scale``, neither below ``tightest``
         (:func:`kronlag.numeric.tolerances.integrator_tolerances`): what an integrator whose global
         error exceeds its local tolerance by about ``scale`` is given."""

@@ -18,6 +18,9 @@
  *                                                       KRONLAG_MAX_PROJECTION_ITERATIONS and
  *                                                       KRONLAG_STALL of tolerances.py)
  *   qd <- qd - B^+ (B qd + c),  B = [Phi_q; A], c = [0; b].
+ * Redundant constraints: the right-hand side counts at most the rank of [Phi_q; A] at the start as
+ * independent rows (kronlag_forward_dynamics_ranked), since the integrator's state, off the
+ * constraints by its drift, would make them nearly dependent instead of dependent.
  * Singular configurations (monitor.c): the steps are limited so that the approach to one is seen;
  * there the integration stops with KRONLAG_RESULT_APPROACH (an index-1 formulation cannot tell
  * the branches apart), and the switching method continues with ALI3-P.
@@ -83,6 +86,7 @@ enum { KL_PHI = KRONLAG_DYNAMICS_PHI, KL_PHI_Q = KRONLAG_DYNAMICS_PHI_Q, KL_PHI_
 typedef struct {
     const double *p;
     double alpha, beta, tol;
+    int generic_rank;                  /* of [Phi_q; A] at the start: redundant rows stay dependent */
     int singular;                      /* the right-hand side met a singular configuration ... */
     double t_singular, y_singular[KL_N];  /* ... there */
 } kl_data;
@@ -94,7 +98,8 @@ static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
     double *dx = N_VGetArrayPointer(ydot);
     double lam[KL_R + 1], mu[KL_S + 1];
     memcpy(dx, x + KL_M, KL_M * sizeof(double));
-    if (!kronlag_forward_dynamics(t, x, x + KL_M, data->p, data->alpha, data->beta, dx + KL_M, lam, mu)) return 0;
+    if (!kronlag_forward_dynamics_ranked(t, x, x + KL_M, data->p, data->alpha, data->beta, data->generic_rank,
+                                         dx + KL_M, lam, mu)) return 0;
     /* A singular configuration is unrecoverable: remember where, for the message. */
     data->singular = 1;
     data->t_singular = t;
@@ -202,7 +207,7 @@ int kronlag_cvode(kronlag_options *o)
     memcpy(y_end, o->y0, KL_N * sizeof(double));
     if (major != 7) return KL_VERSION_MISMATCH;
     int n_eval = o->n_eval;
-    kl_data data = {p, o->alpha, o->beta, o->projection_tol, 0, 0.0, {0.0}};
+    kl_data data = {p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}};
     SUNContext ctx = NULL;
     N_Vector y = NULL, dense = NULL;
     SUNMatrix J = NULL;
@@ -213,6 +218,12 @@ int kronlag_cvode(kronlag_options *o)
     kl_monitor monitor;
     kl_progress progress = {kl_clock()};
     kl_constraints(t0, o->y0, p, terms, B, c);
+    if (KL_K > 0) {
+        double magnitudes[KL_K + 1];
+        int perm[KL_K + 1];
+        rank_magnitudes(B, KL_K, KL_M, magnitudes, perm);
+        data.generic_rank = rank_of(magnitudes, KL_K < KL_M ? KL_K : KL_M);
+    }
     kl_monitor_start(&monitor, t0, o->y0, terms + KL_PHI_Q, o->events, o->max_events);
     if (SUNContext_Create(0, &ctx) || SUNContext_ClearErrHandlers(ctx)) goto done;
     if (!(y = N_VNew_Serial(KL_N, ctx)) || !(dense = N_VNew_Serial(KL_N, ctx)) || !(J = SUNDenseMatrix(KL_N, KL_N, ctx))

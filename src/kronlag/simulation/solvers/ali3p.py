@@ -49,7 +49,7 @@ class Index3Solver(Solver):
     #: method accumulates over ~1e4 steps, and its error control bounds the positions only, while
     #: the velocities' errors are what a later motion amplifies (IFToMM A02: with 3000 and ``atol``
     #: kept, the switching method's error of B0 was 2 to 12 mm at rtol 1e-4 to 1e-8, atol 1e-6;
-    #: with 3e5 for both it is below 3e-4 m at rtol 1e-4 and 2e-5 m at rtol 1e-6 and tighter).
+    #: with 3e5 for both it is below 3e-4 m at rtol 1e-4 and 1e-5 m at rtol 1e-6 and tighter).
     TOLERANCE_SCALE = 3e5
 
     @staticmethod

@@ -82,5 +82,5 @@ def cvode_segment(problem: MultibodyProblem, options: SolverOptions, t0: float, 
     singular configuration (:attr:`Result.APPROACH`)."""
     scaled = options.scaled(CompiledSolver.TOLERANCE_SCALE, CVODE_TIGHTEST)
     # the outputs' projection no tighter than the floor either: |Phi| cannot be made smaller than rounding
-    return run("cvode", problem, scaled, t0, y0, projection_tol=max(scaled.projection_tol, CVODE_TIGHTEST),
+    return run("cvode", problem, scaled, t0, y0, projection_tol=max(scaled.projection_tol, CVODE_TIGHTEST[1]),
                alpha=problem.alpha, beta=problem.beta)

@@ -3,8 +3,12 @@
 
 /* Solve [[M, G^T], [G, 0]] [qdd; nu] = [h; c] with G = [Phi_q; A] (K x m), rank-revealing.
  * terms: the output of kronlag_dynamics (the blocks of codegen.LAYOUTS["dynamics"]).
+ * max_rank caps the numerical rank at the generic rank of G, which an integrator knows from its
+ * start: off the constraint manifold (an integrator's state between projections) the rows of
+ * redundant constraints are no longer exactly dependent, and counting them as independent would
+ * solve a nearly singular system (accelerations of order drift / rounding).
  * Returns 0, or 1 when M is not positive definite on the null space of G. */
-static int kronlag_solve(const double *terms, const double *qd, double alpha, double beta,
+static int kronlag_solve(const double *terms, const double *qd, double alpha, double beta, int max_rank,
                          double *qdd, double *nu, int *rank)
 {
     enum { m = KRONLAG_M, r = KRONLAG_R, s = KRONLAG_S, k = KRONLAG_K };
@@ -28,6 +32,7 @@ static int kronlag_solve(const double *terms, const double *qd, double alpha, do
     double magnitudes[k + 1];
     for (int j = 0; j < steps; ++j) magnitudes[j] = fabs(X[j * k + j]);
     int rho = rank_of(magnitudes, steps);
+    if (rho > max_rank) rho = max_rank;
     *rank = rho;
     /* B = Q^T M Q, y = Q^T h with Q = H_0 ... H_{rho-1}; Z = Q[:, rho:] spans the null space of G. */
     memcpy(B, M, sizeof B);
@@ -80,17 +85,25 @@ static int kronlag_solve(const double *terms, const double *qd, double alpha, do
     return 0;
 }
 
-/* Forward dynamics with multipliers (Baumgarte alpha, beta); 0 on success, 1 if singular. */
-int kronlag_forward_dynamics(double t, const double *q, const double *qd, const double *p,
-                             double alpha, double beta, double *qdd, double *lam, double *mu)
+/* Forward dynamics with multipliers (Baumgarte alpha, beta), at most max_rank independent rows of
+ * [Phi_q; A] (KRONLAG_K: the numerical rank alone decides); 0 on success, 1 if singular. */
+int kronlag_forward_dynamics_ranked(double t, const double *q, const double *qd, const double *p,
+                                    double alpha, double beta, int max_rank, double *qdd, double *lam, double *mu)
 {
     double terms[KRONLAG_DYNAMICS_SIZE + 1], nu[KRONLAG_K + 1];
     int rank;
     kronlag_dynamics(t, q, qd, p, terms);
-    int status = kronlag_solve(terms, qd, alpha, beta, qdd, nu, &rank);
+    int status = kronlag_solve(terms, qd, alpha, beta, max_rank, qdd, nu, &rank);
     for (int j = 0; j < KRONLAG_R; ++j) lam[j] = nu[j];
     for (int j = 0; j < KRONLAG_S; ++j) mu[j] = nu[KRONLAG_R + j];
     return status;
+}
+
+/* Forward dynamics with multipliers (Baumgarte alpha, beta); 0 on success, 1 if singular. */
+int kronlag_forward_dynamics(double t, const double *q, const double *qd, const double *p,
+                             double alpha, double beta, double *qdd, double *lam, double *mu)
+{
+    return kronlag_forward_dynamics_ranked(t, q, qd, p, alpha, beta, KRONLAG_K, qdd, lam, mu);
 }
 
 /* Entry point for Python: in = [t, alpha, beta, q (m), qd (m), p (P)], out = [qdd (m), lambda (r), mu (s)];
@@ -101,5 +114,5 @@ int kronlag_forward_dynamics_packed(const double *in, double *out)
     int rank;
     const double *q = in + 3, *qd = q + KRONLAG_M;
     kronlag_dynamics(in[0], q, qd, qd + KRONLAG_M, terms);
-    return kronlag_solve(terms, qd, in[1], in[2], out, out + KRONLAG_M, &rank) ? -1 : rank;
+    return kronlag_solve(terms, qd, in[1], in[2], KRONLAG_K, out, out + KRONLAG_M, &rank) ? -1 : rank;
 }
