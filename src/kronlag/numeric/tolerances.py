@@ -74,12 +74,11 @@ STALL = 1e-15
 #: CVODE stops with "too much accuracy requested").
 CVODE_TIGHTEST = (1e-14, 1e-14)
 #: The tightest ``(rtol, atol)`` handed to ALI3-P: its velocities ``2/h (q - q0) - v0`` carry the
-#: rounding of the positions' Newton iteration (``1e-13 (1 + |q|)``) amplified by ``2/h``, so a
-#: tighter tolerance only adds steps and makes the error larger.  IFToMM A02 (N = 2 and 4, the
-#: switching method, rtol 1e-6 to 1e-10): with an ``atol`` floor of 3e-12 the error of B0 levels off
-#: at 1.3-1.8e-5 m, with 3e-11 at 0.6-1.4e-5 m, with 1e-10 at 0.1-0.8e-5 m but IFToMM A04's energy
-#: drift at rtol = atol = 1e-10 grows from 2e-9 to 1.4e-8 of 5 m g L; ``rtol`` is floored at 3e-12.
-INDEX3_TIGHTEST = (3e-12, 3e-11)
+#: rounding of the positions' Newton iteration amplified by ``2/h``, so an absolute tolerance at
+#: rounding level only adds steps and makes the error larger.  IFToMM A02 (N = 2 and 4, the switching
+#: method at rtol 1e-8, atol 1e-10): the error of B0 is 1.6-1.8e-5 m with floors (3e-12, 3e-12),
+#: 0.7e-5 m with (3e-12, 3e-11), 4-5e-6 m with (1e-12, 1e-11), 1.4e-7 to 2e-6 m with (3e-13, 1e-11).
+INDEX3_TIGHTEST = (3e-13, 1e-11)
 #: An eigenvalue ``w^2`` of a linearization at most this fraction of the problem's scale is zero
 #: within rounding (see the module docstring); rounding leaves ~1e-15 of it, a true mode far more.
 ZERO_EIGENVALUE_RTOL = 1e-9
