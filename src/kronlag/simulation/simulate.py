@@ -100,8 +100,7 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
 
         ``'switching'``
             ``'compiled'`` away from singular configurations, ``'ali3p'``
-            through them (and throughout when the constraints are redundant at
-            the start) (:class:`SwitchingSolver`);
+            through them, redundant constraints included (:class:`SwitchingSolver`);
         ``'ali3p'``
             index-3 augmented Lagrangian with mass-orthogonal projections,
             trapezoidal rule, compiled (:class:`Index3Solver`): passes singular

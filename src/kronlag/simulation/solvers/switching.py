@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import replace
 
 
-from ...numeric.tolerances import matrix_rank
 from ..drivers import Segment, require, segment_status, solution_of
 from ..problem import MultibodyProblem, Solution, Solver
 from .ali3p import Index3Solver, index3_segment
@@ -22,9 +21,10 @@ class SwitchingSolver(Solver):
     the approach to a singular configuration (:data:`kronlag.tolerances.APPROACH_RTOL`)
     the index-3 method takes over from the projected state and passes it on the
     branch the motion is on; once the motion is clear of it
-    (:data:`~kronlag.tolerances.LEAVE_RTOL`) CVODE continues.  A model whose
-    constraints are redundant at the start (``Phi_q`` rank deficient) is integrated
-    by ALI3-P throughout.  Smooth problems cost what :class:`CompiledSolver` costs.
+    (:data:`~kronlag.tolerances.LEAVE_RTOL`) CVODE continues.  Redundant constraints
+    (``Phi_q`` rank deficient at the start) are treated alike: CVODE counts the rank at
+    its start as the independent rows, and the watch for singular configurations looks
+    at the conditioning of those rows.  Smooth problems cost what :class:`CompiledSolver` costs.
     """
 
     name = "switching"
@@ -40,14 +40,13 @@ class SwitchingSolver(Solver):
     def solve(self, problem: MultibodyProblem) -> Solution:
         require(self, problem.model)
         model, options = problem.model, self.options
-        redundant = model.r and matrix_rank(model.Phi_q(problem.q0, problem.t0), model.rank_rtol) < model.r
         segments: list[Segment] = []
-        t, y, index3 = problem.t0, problem.y0, bool(redundant)
+        t, y, index3 = problem.t0, problem.y0, False
         while True:
             steps_left = options.max_steps - sum(segment.steps for segment in segments)
             budget = replace(options, max_steps=max(steps_left, 0))
             if index3:
-                segment = index3_segment(problem, budget, t, y, handback=not redundant)
+                segment = index3_segment(problem, budget, t, y, handback=True)
             else:
                 segment = cvode_segment(problem, budget, t, y)
             segments.append(segment.without_first_row() if segments and problem.t_eval is None else segment)
