@@ -184,7 +184,7 @@ def quick_return_by_joints():
 @functools.cache
 def numeric_by_joints(builder, values_name):
     values = {"four_bar": FOUR_BAR_VALUES, "quick_return": QUICK_RETURN_VALUES}[values_name]
-    return kronlag.derive(builder()).numeric(values, backend="numpy")
+    return kronlag.derive(builder()).numeric(values, backend="python")
 
 
 # -- closed-form trajectories for the graphics ----------------------------------------------------

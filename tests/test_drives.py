@@ -203,7 +203,7 @@ def test_a_partly_driven_double_pendulum_swings_like_the_reduced_equation():
 
 def test_kinematics_of_named_points():
     """The engine's wrist point follows the closed-form piston position x(theta)."""
-    engine = kronlag.model.builtin.load_example("slider_crank_engine")
+    engine = kronlag.model.builtin.load_example("slider_crank_engine", apply_drives=False)
     engine.system.add_drive("theta_crank", 20 * T)
     model = kronlag.derive(engine.system).numeric(engine.numeric_values())
     times = np.linspace(0, 0.3, 31)
@@ -309,7 +309,7 @@ def test_five_bar_driven_at_its_end_effector_reports_the_motor_torques(tmp_path,
     from kronlag.app.workflows import inverse_dynamics_along
 
     path = five_bar_circle_file(tmp_path)
-    robot = kronlag.load_model(path)
+    robot = kronlag.load_model(path, apply_drives=False)  # the drives go to inverse_dynamics_along
     times = np.linspace(0, 1, 401)
     run = inverse_dynamics_along(robot, robot.drives, times, actuated=["theta1", "theta2"])
     assert run.success, run.message

@@ -9,7 +9,7 @@ import pytest
 import kronlag
 from kronlag.model.builtin import load_example
 
-VALUES = load_example("five_bar").numeric_values()
+VALUES = load_example("five_bar", apply_drives=False).numeric_values()
 D, L1, L2, M1, M2, I1, I2, G = (VALUES[name] for name in ("d", "l1", "l2", "m1", "m2", "I1", "I2", "g"))
 #: Base angles (theta1, theta2) in the working mode of the shipped file: elbows out, end effector above.
 POSES = [(2 * np.pi / 3, np.pi / 3), (2.3, 1.3), (1.8, 0.4), (2.9, 1.2)]

@@ -109,7 +109,7 @@ def test_named_points_numerically_against_finite_differences():
         system.add_point("x", "shaft", (0, 0))
     values = dict(l1=0.2, l2=0.6, l3=0.5, l4=0.5, m1=1, m2=3, m3=2.5, I1=0.0033, I2=0.09, I3=0.052, g=9.81,
                   tau=0.0)
-    model = kronlag.derive(system).numeric(values, backend="numpy")
+    model = kronlag.derive(system).numeric(values, backend="python")
     q, qd, qdd = np.array([1.0, 0.5, 1.5]), np.array([0.3, -0.7, 1.1]), np.array([2.0, 0.4, -1.0])
     state = model.point_state("coupler tip", q, qd, qdd)
     tip = lambda x: np.array([0.2 * np.cos(x[0]) + 0.6 * np.cos(x[1]), 0.2 * np.sin(x[0]) + 0.6 * np.sin(x[1])])

@@ -113,7 +113,7 @@ def spatial_system(inertia) -> System:
 def test_unphysical_bodies_are_refused_at_the_numeric_stage(inertia, values, problem):
     equations = kronlag.derive(spatial_system(inertia))
     with pytest.raises(ModelError) as caught:
-        equations.numeric(values, backend="numpy")
+        equations.numeric(values, backend="python")
     assert problem in str(caught.value)
 
 
@@ -130,7 +130,7 @@ def test_physical_bodies_pass():
 
 def test_every_builtin_model_is_physical_with_its_file_values():
     for name in models.BUILTIN_MODELS:
-        model = kronlag.model.builtin.load_example(name)
+        model = kronlag.model.builtin.load_example(name, apply_drives=False)
         check_parameter_values(model.system, model.numeric_values())
 
 

@@ -75,7 +75,7 @@ def reference_final(model_file) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def example():
-    return load_example("four_bar")
+    return load_example("four_bar", apply_drives=False)
 
 
 @pytest.fixture(scope="module")

@@ -126,7 +126,7 @@ def engine():
     import kronlag
     from kronlag.model.builtin import load_example
 
-    engine = load_example("slider_crank_engine")
+    engine = load_example("slider_crank_engine", apply_drives=False)
     model = kronlag.derive(engine.system).numeric(engine.numeric_values(), backend="python")
     q_guess, qd_guess = engine.guess_vectors()
     q0, qd0 = model.assemble(q_guess, fixed={"theta_crank": 0.0}, qd_guess=qd_guess, qd_fixed={"theta_crank": 157.0})

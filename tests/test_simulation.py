@@ -233,7 +233,8 @@ def test_auto_is_switching_and_outputs_every_step():
 
 
 def test_numpy_backend_uses_python_methods():
-    model = four_bar_model(0.5, backend="numpy")
+    with pytest.warns(DeprecationWarning, match="backend='numpy' is deprecated, use backend='python'"):
+        model = four_bar_model(0.5, backend="numpy")
     q0, qd0 = initial_state()
     trajectory = kronlag.simulate(model, (0.0, T_END), q0, qd0, t_eval=T_EVAL)
     assert trajectory.method == "projection"

@@ -25,7 +25,7 @@ def arm(name: str) -> kronlag.NumericModel:
     """The arm derived with the defaults, numeric with g = 9.81 and no joint torques."""
     system = models.BUILTIN_MODELS[name]()
     values = {p.name: 0.0 for p in system.parameters} | {"g": 9.81}
-    return kronlag.derive(system).numeric(values, backend="numpy")
+    return kronlag.derive(system).numeric(values, backend="python")
 
 
 def random_states(m: int, count: int = 4, seed: int = 3):

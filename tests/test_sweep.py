@@ -17,7 +17,7 @@ T_EVAL = np.linspace(0.0, 1.0, 21)
 
 @pytest.fixture(scope="module")
 def example():
-    return load_example("four_bar")
+    return load_example("four_bar", apply_drives=False)
 
 
 @pytest.fixture(scope="module")
