@@ -22,7 +22,7 @@ def equations():
     return kronlag.derive(kronlag.models.four_bar())
 
 
-@pytest.fixture(scope="module", params=["numpy", "c"])
+@pytest.fixture(scope="module", params=["python", "c"])
 def model(request, equations):
     if request.param == "c" and not kronlag.numeric.codegen.c_compiler():
         pytest.skip("no C compiler")

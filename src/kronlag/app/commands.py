@@ -144,7 +144,7 @@ _KINEMATICS_OUTPUTS = (OutputKind("--output", (".csv", ".npz"), no_check, _save_
 def _models(arguments: argparse.Namespace) -> None:
     for name in example_names():
         kind = "built-in" if name in BUILTIN_MODELS else "example"
-        print(f"{name:<18} {kind:<9} {load_model(example_path(name)).description}")
+        print(f"{name:<18} {kind:<9} {load_model(example_path(name), apply_drives=False).description}")
     folder = example_path(example_names()[0]).parent
     print(f"\nmodel files: {folder}  (copy one to start a model of your own)")
 
