@@ -202,3 +202,27 @@ def test_index3_methods_keep_the_branch_even_at_loose_tolerances(method, rtol):
     assert trajectory.success, trajectory.message
     angles = np.mod(trajectory.q[:, cranks] - trajectory.q[:, cranks[:1]] + np.pi, 2 * np.pi) - np.pi
     assert np.max(np.abs(angles)) < 1e-6
+
+
+@pytest.mark.parametrize("method", ["auto", "compiled"])
+def test_parallelogram_started_at_its_singular_configuration_is_never_silently_wrong(method):
+    # Cranks horizontal and in line with the coupler: Phi_q has rank 4 (the redundant crank and the
+    # singular configuration), 5 once the motion leaves it. The reduced pendulum is the reference.
+    from scipy.integrate import solve_ivp
+
+    model = parallelogram()
+    speed = 2.0
+    q0, qd0 = np.array([0.0, 0.0, 0.0, 2.0, 0.0, 0.0]), np.array([speed, speed, speed, 0.0, speed, 0.0])
+    assert np.linalg.matrix_rank(model.Phi_q(q0), tol=1e-8) == 4
+    times = np.linspace(0.0, 2.0, 41)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", kronlag.RedundantConstraintsWarning)
+        trajectory = kronlag.simulate(model, (0.0, 2.0), q0, qd0, method=method, t_eval=times)
+    reference = solve_ivp(lambda t, y: [y[1], -3.5 * 9.81 * np.cos(y[0]) / 3.0], (0.0, 2.0), [0.0, speed],
+                          method="DOP853", rtol=1e-12, atol=1e-12, t_eval=times)
+    if method == "auto":  # the default starts with ALI3-P, which is sure of the branch
+        assert trajectory.success, trajectory.message
+    if trajectory.success:
+        np.testing.assert_allclose(trajectory.q[:, :3], np.repeat(reference.y[0][:, None], 3, axis=1), atol=1e-5)
+    else:
+        assert "t = " in trajectory.message and "q = " in trajectory.message

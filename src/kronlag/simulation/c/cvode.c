@@ -20,7 +20,10 @@
  *   qd <- qd - B^+ (B qd + c),  B = [Phi_q; A], c = [0; b].
  * Redundant constraints: the right-hand side counts at most the rank of [Phi_q; A] at the start as
  * independent rows (kronlag_forward_dynamics_ranked), since the integrator's state, off the
- * constraints by its drift, would make them nearly dependent instead of dependent.
+ * constraints by its drift, would make them nearly dependent instead of dependent.  Should a
+ * capped row become clearly independent (magnitude above KRONLAG_LEAVE_RTOL of the largest: the
+ * start was a singular configuration, not redundant constraints), the segment stops as at the
+ * approach to a singular configuration rather than integrate with a constraint left out.
  * Singular configurations (monitor.c): the steps are limited so that the approach to one is seen;
  * there the integration stops with KRONLAG_RESULT_APPROACH (an index-1 formulation cannot tell
  * the branches apart), and the switching method continues with ALI3-P.
@@ -117,6 +120,19 @@ static void kl_constraints(double t, const double *q, const double *p, double *t
     memcpy(B + KL_R * KL_M, terms + KL_A, KL_S * KL_M * sizeof(double));
     for (int i = 0; i < KL_R; ++i) c[i] = terms[KL_PHI_T + i];
     for (int i = 0; i < KL_S; ++i) c[KL_R + i] = terms[KL_B + i];
+}
+
+/* 1 when [Phi_q; A] at (t, q) has clearly more independent rows than data->generic_rank, the cap
+ * of the right-hand side (only possible when that rank was below the number of rows). */
+static int kl_rank_rose(double t, const double *q, const kl_data *data)
+{
+    enum { steps = KL_K < KL_M ? KL_K : KL_M };
+    if (data->generic_rank >= steps) return 0;
+    double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1], magnitudes[KL_K + 1];
+    int perm[KL_K + 1];
+    kl_constraints(t, q, data->p, terms, B, c);
+    rank_magnitudes(B, KL_K, KL_M, magnitudes, perm);
+    return magnitudes[data->generic_rank] > KRONLAG_LEAVE_RTOL * magnitudes[0];
 }
 
 /* Project x = [q, qd] in place.  Returns 0, or 1 if the projection failed. */
@@ -284,7 +300,7 @@ int kronlag_cvode(kronlag_options *o)
         }
         int stop = kl_progress_report(o, &progress, t);
         if (stop) { flag = stop; break; }
-        if (ratio < KRONLAG_APPROACH_RTOL) { flag = KRONLAG_RESULT_APPROACH; break; }
+        if (ratio < KRONLAG_APPROACH_RTOL || kl_rank_rose(t, x, &data)) { flag = KRONLAG_RESULT_APPROACH; break; }
     }
     memcpy(y_end, x, KL_N * sizeof(double));
     if (flag == KRONLAG_RESULT_APPROACH && kl_project(t, y_end, &data)) flag = KRONLAG_RESULT_PROJECTION_FAILED;

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 
+from ...numeric.tolerances import matrix_rank
 from ..drivers import Segment, require, segment_status, solution_of
 from ..problem import MultibodyProblem, Solution, Solver
 from .ali3p import Index3Solver, index3_segment
@@ -21,10 +22,11 @@ class SwitchingSolver(Solver):
     the approach to a singular configuration (:data:`kronlag.tolerances.APPROACH_RTOL`)
     the index-3 method takes over from the projected state and passes it on the
     branch the motion is on; once the motion is clear of it
-    (:data:`~kronlag.tolerances.LEAVE_RTOL`) CVODE continues.  Redundant constraints
-    (``Phi_q`` rank deficient at the start) are treated alike: CVODE counts the rank at
-    its start as the independent rows, and the watch for singular configurations looks
-    at the conditioning of those rows.  Smooth problems cost what :class:`CompiledSolver` costs.
+    (:data:`~kronlag.tolerances.LEAVE_RTOL`) CVODE continues.  ``Phi_q`` rank deficient
+    at the start (redundant constraints, or a start at a singular configuration) starts
+    with ALI3-P, which hands over as soon as its watch allows; CVODE counts the rank at its
+    own start as the independent rows and stops, as at an approach, should a further row
+    become clearly independent.  Smooth problems cost what :class:`CompiledSolver` costs.
     """
 
     name = "switching"
@@ -40,8 +42,11 @@ class SwitchingSolver(Solver):
     def solve(self, problem: MultibodyProblem) -> Solution:
         require(self, problem.model)
         model, options = problem.model, self.options
+        # rank deficient at the start: redundant rows or a singular configuration, which one a single
+        # state cannot tell; ALI3-P starts either way and hands over once its watch allows
+        deficient = model.r and matrix_rank(model.Phi_q(problem.q0, problem.t0), model.rank_rtol) < model.r
         segments: list[Segment] = []
-        t, y, index3 = problem.t0, problem.y0, False
+        t, y, index3 = problem.t0, problem.y0, bool(deficient)
         while True:
             steps_left = options.max_steps - sum(segment.steps for segment in segments)
             budget = replace(options, max_steps=max(steps_left, 0))
