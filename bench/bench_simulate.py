@@ -167,6 +167,9 @@ def main() -> None:
                                                           t_eval=t_eval), count)
         times[name] = elapsed
         label = f"{name} ({run.method})" if name == "auto" else name
+        if not run.success:  # a failed run is reported, not compared
+            print(f"{label:<22}{elapsed * 1e3:>11.2f}{run.steps:>8}{run.nfev:>8}   FAILED: {run.message}")
+            continue
         energy = np.ptp(run.total_energy) / abs(run.total_energy[0])
         print(f"{label:<22}{elapsed * 1e3:>11.2f}{run.steps:>8}{run.nfev:>8}"
               f"{np.max(np.abs(run.position_residual)):>11.1e}{np.max(np.abs(run.velocity_residual)):>11.1e}"
