@@ -21,7 +21,7 @@ from ..numeric.tolerances import ZERO_EIGENVALUE_RTOL
 from ..studies.linearization import LinearModel
 from ..studies.sweeps import SweepInterrupted, SweepResult, sweep
 from .commands import method_help, output_times
-from .outputs import IncompleteRun, _check_writable
+from .outputs import IncompleteRun, check_writable
 from .workflows import model_units, numeric_model
 
 
@@ -172,7 +172,7 @@ def _sweep(arguments: argparse.Namespace) -> None:
     if output:  # before any work: a sweep must not end with nowhere to put its table
         if output.suffix not in (".csv", ".parquet"):
             raise ModelError(f"--output {output}: the file name must end in .csv or .parquet")
-        _check_writable(output, "--output")
+        check_writable(output, "--output")
     model = resolve_model(arguments.model)
     grid = {name: _axis_values(model, name, values) for name, values in arguments.grid}
     settings = {name: model.parameter_value(name, value) for name, value in arguments.set or ()}

@@ -13,7 +13,7 @@ from pathlib import Path
 from ..core.errors import ModelError
 from ..model.modelfile import ModelFile
 
-__all__ = ["IncompleteRun", "RunInterrupted", "OutputKind", "PLOT_SUFFIXES", "no_check", "requested_outputs", "finish_run", "emit"]
+__all__ = ["IncompleteRun", "RunInterrupted", "OutputKind", "PLOT_SUFFIXES", "no_check", "requested_outputs", "check_writable", "finish_run", "emit"]
 
 
 class IncompleteRun(Exception):
@@ -54,13 +54,13 @@ def requested_outputs(kinds: Sequence[OutputKind], arguments: argparse.Namespace
         path = Path(value)
         if path.suffix not in kind.suffixes:
             raise ModelError(f"{kind.option} {value}: the file name must end in {', '.join(kind.suffixes)}")
-        _check_writable(path, kind.option)
+        check_writable(path, kind.option)
         kind.check(path, arguments, model)
         outputs.append((kind, path))
     return outputs
 
 
-def _check_writable(path: Path, option: str) -> None:
+def check_writable(path: Path, option: str) -> None:
     """Make sure a file can be written at ``path`` (by writing nothing to it), creating its folder."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -14,6 +14,7 @@ import numpy as np
 import sympy as sp
 
 from ..core.errors import InputError
+from ..core.dependencies import dependency_order
 from ..model.bodies import check_parameter_values
 from ..model.symbols import name_indices
 
@@ -139,7 +140,7 @@ class ParameterValues:
 
 def _in_dependency_order(names: tuple[str, ...], expressions: Mapping[int, sp.Expr],
                          time_varying: set[int]) -> tuple[tuple[int, sp.Expr], ...]:
-    """The definitions ordered so that each comes after those it uses (Kahn's algorithm, linear);
+    """The definitions ordered so that each comes after those it uses (:func:`dependency_order`);
     InputError for an unknown name, a time-varying dependency or a cycle."""
     index = {name: i for i, name in enumerate(names)}
     uses: dict[int, set[int]] = {}
@@ -153,19 +154,8 @@ def _in_dependency_order(names: tuple[str, ...], expressions: Mapping[int, sp.Ex
             raise InputError(f"parameter {names[i]} = {expression} uses the time-varying {', '.join(varying)}: "
                              "give it a value or a callable f(t) of its own")
         uses[i] = {index[name] for name in used} & expressions.keys()
-    users: dict[int, list[int]] = {i: [] for i in expressions}
-    for i, used in uses.items():
-        for j in used:
-            users[j].append(i)
-    waiting = {i: len(used) for i, used in uses.items()}
-    order = sorted(i for i, count in waiting.items() if count == 0)  # grows while it is read: first in, first out
-    for i in order:
-        for user in users[i]:
-            waiting[user] -= 1
-            if waiting[user] == 0:
-                order.append(user)
-    if len(order) < len(expressions):
-        left = expressions.keys() - set(order)  # the cycles and what depends on them
+    order, left = dependency_order(uses)
+    if left:  # the cycles and what depends on them
         while (used := set().union(*(uses[i] for i in left)) & left) != left:  # drop the mere dependents
             left = used
         cycle = sorted(names[i] for i in left)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
+from ...core.dependencies import dependency_order
 from ...core.errors import DrivesNotAppliedWarning, ModelError
 from ..system import System
 from .units import si_unit
@@ -98,24 +99,12 @@ class ModelFile:
         missing = sorted(set().union(*uses.values()) - pending.keys())
         if missing:
             raise ModelError(f"parameter values use parameters without a value: {', '.join(missing)}")
-        # in dependency order (Kahn's): linear in the number of parameters, also for a long chain
-        users: dict[str, list[str]] = {name: [] for name in pending}
-        for name, used in uses.items():
-            for other in used:
-                users[other].append(name)
-        waiting = {name: len(used) for name, used in uses.items()}
-        ready = [name for name, count in waiting.items() if not count]
+        order, unresolved = dependency_order(uses)
+        if unresolved:
+            raise ModelError(f"parameter values depend on each other in a cycle: {', '.join(sorted(unresolved))}")
         resolved: dict[str, float] = {}
-        while ready:
-            name = ready.pop()
+        for name in order:
             resolved[name] = to_float(pending[name], resolved, f"value of parameter {name}")
-            for user in users[name]:
-                waiting[user] -= 1
-                if not waiting[user]:
-                    ready.append(user)
-        if len(resolved) < len(pending):
-            raise ModelError(f"parameter values depend on each other in a cycle: "
-                             f"{', '.join(sorted(pending.keys() - resolved.keys()))}")
         return {name: resolved[name] for name in pending}
 
     def driven(self) -> ModelFile:
