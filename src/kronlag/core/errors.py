@@ -41,6 +41,7 @@ __all__ = [
     "InitialStateWarning",
     "DrivesNotAppliedWarning",
     "CacheWarning",
+    "CompilerWarning",
 ]
 
 
@@ -122,3 +123,9 @@ class DrivesNotAppliedWarning(KronlagWarning):
 class CacheWarning(KronlagWarning):
     """The cache directory of compiled code cannot be used (not the user's alone, not writable, or a
     library there does not carry its key): a private temporary directory is used instead."""
+
+
+class CompilerWarning(KronlagWarning):
+    """The C compiler kronlag chose is not the first one it looked for (reported once per process): ``$CC``
+    does not work (the line says why), no compiler works but ``zig cc`` of the ``ziglang`` package, or none
+    at all (the ``"auto"`` backend is then the Python one)."""
