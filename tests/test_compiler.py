@@ -114,8 +114,8 @@ def test_no_compiler_at_all_is_a_compiler_error_naming_what_was_tried(tmp_path, 
     monkeypatch.setitem(sys.modules, "ziglang", None)  # not installed
     with pytest.warns(CompilerWarning, match="no working C compiler found.*Python backend is used"):
         assert codegen.c_compiler() is None
-    with pytest.raises(codegen.CompilerError, match=r"\$CC=/bin/false does not work.*gcc: not on PATH.*"
-                                                    r"ziglang package: not installed \(pip install kronlag\[compiler\]"):
+    tried = r"\$CC=/bin/false does not work.*gcc: not on PATH.*ziglang package: not installed \(pip install kronlag"
+    with pytest.raises(codegen.CompilerError, match=tried):
         codegen.compile_shared_library("int f(void) { return 1; }\n")
 
 

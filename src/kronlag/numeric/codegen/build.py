@@ -17,7 +17,7 @@ import subprocess
 import sys
 import tempfile
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -44,7 +44,8 @@ C_LARGE_SOURCE = 100_000
 _LARGE_KERNEL_OPTIMIZATION = "-O1"
 #: The name under which the C compiler of the ``ziglang`` package is reported and chosen.
 _ZIG = "zig cc"
-#: Flags of one compiler besides the common ones, by :attr:`CCompiler.name`.  ``zig cc`` compiles
+#: Flags of one compiler besides the common ones, by :attr:`CCompiler.name`, when compiling and when
+#: linking (zig links a C runtime built for these flags, once: the probe's).  ``zig cc`` compiles
 #: for the build machine's own CPU (a library cached in a home directory shared with an older
 #: machine would not run there, and FMA contraction would round unlike GCC's baseline build),
 #: with debug information and frame pointers unless told otherwise; these flags make it build as
@@ -150,15 +151,19 @@ def _choose(candidates: tuple[_Candidate, ...]) -> tuple[CCompiler | None, str]:
 
 @lru_cache(maxsize=None)
 def _probe(name: str, command: tuple[str, ...]) -> tuple[CCompiler | None, str]:
-    """``command`` as a :class:`CCompiler` if it compiles and links a small shared library, else None and why."""
-    flags = _COMPILER_FLAGS.get(name, ())
+    """``command`` as a :class:`CCompiler` if it compiles and links a small shared library as
+    :func:`_build` does, else None and why."""
+    compiler = CCompiler(name, command, "", _COMPILER_FLAGS.get(name, ()))
     with tempfile.TemporaryDirectory(prefix="kronlag-probe-") as work:
-        source, library = Path(work) / "probe.c", Path(work) / "probe.so"
+        source, probe, library = Path(work) / "probe.c", Path(work) / "probe.o", Path(work) / "probe.so"
         source.write_text(_PROBE_SOURCE)
         try:
-            build = subprocess.run([*command, _OPTIMIZATION, *_CFLAGS, *flags, "-shared", "-o", str(library),
-                                    str(source), "-lm"], capture_output=True, text=True, stdin=subprocess.DEVNULL,
-                                   timeout=_PROBE_TIMEOUT)
+            for step in (_compile_command(compiler, (_OPTIMIZATION,), source, probe),
+                         _link_command(compiler, [probe], library)):
+                build = subprocess.run(step, capture_output=True, text=True, stdin=subprocess.DEVNULL,
+                                       timeout=_PROBE_TIMEOUT)
+                if build.returncode:
+                    break
             version = subprocess.run([*command, "--version"], capture_output=True, text=True,
                                      stdin=subprocess.DEVNULL, timeout=_PROBE_TIMEOUT)
         except (OSError, subprocess.TimeoutExpired) as error:
@@ -169,7 +174,21 @@ def _probe(name: str, command: tuple[str, ...]) -> tuple[CCompiler | None, str]:
     first_line = (version.stdout.strip().splitlines() or ["unknown version"])[0]
     if name == _ZIG:
         first_line = f"ziglang {importlib.metadata.version('ziglang')}, {first_line}"
-    return CCompiler(name, command, first_line, flags), ""
+    return replace(compiler, version=first_line), ""
+
+
+def _compile_command(compiler: CCompiler, flags: tuple[str, ...], source: Path, output: Path) -> list[str]:
+    """The command compiling ``source`` into the object ``output`` with ``flags`` (optimization, defines)."""
+    return [*compiler.command, *flags, *_CFLAGS, *compiler.flags, "-c", "-o", str(output), str(source)]
+
+
+def _link_command(compiler: CCompiler, objects: list[Path], output: Path) -> list[str]:
+    """The command linking ``objects`` into the shared library ``output``, its undefined symbols
+    resolved at load time (the SUNDIALS calls of the compiled drivers); with an optimization level
+    because zig links a C runtime built for it (once per level: always the same one)."""
+    undefined = ["-undefined", "dynamic_lookup"] if sys.platform == "darwin" else []
+    return [*compiler.command, _OPTIMIZATION, *compiler.flags, "-shared", "-pthread", *undefined, "-o", str(output),
+            *map(str, objects), "-lm"]
 
 
 def cache_directory() -> Path:
@@ -289,7 +308,8 @@ def _build_plan(source: str, parts: int) -> tuple[CCompiler, list[tuple[str, ...
                             "use backend='python'")
     kernel_level = _LARGE_KERNEL_OPTIMIZATION if len(source) > C_LARGE_SOURCE else _OPTIMIZATION
     levels = [_SOLVER_FLAGS] + [(kernel_level,)] * (parts - 1) if parts > 1 else [(_OPTIMIZATION,)]
-    key = hashlib.sha256("\0".join((compiler.identity, *_CFLAGS, *map(" ".join, levels), source)).encode()).hexdigest()[:32]
+    facts = (compiler.identity, *_CFLAGS, *map(" ".join, levels), source)
+    key = hashlib.sha256("\0".join(facts).encode()).hexdigest()[:32]
     return compiler, levels, key
 
 
@@ -378,10 +398,9 @@ def _build(compiler: CCompiler, levels: list[tuple[str, ...]], source: str, targ
         source_path = Path(work) / "model.c"
         source_path.write_text(source)
         objects = [Path(work) / f"part{i}.o" for i in range(parts)]
-        defines = [[f"-DKRONLAG_PART={i}", f"-DKRONLAG_PARTS={parts}"] if parts > 1 else [] for i in range(parts)]
+        defines = [(f"-DKRONLAG_PART={i}", f"-DKRONLAG_PARTS={parts}") if parts > 1 else () for i in range(parts)]
         try:
-            processes = [subprocess.Popen([*compiler.command, *level, *_CFLAGS, *compiler.flags, *define, "-c",
-                                           "-o", str(obj), str(source_path)],
+            processes = [subprocess.Popen(_compile_command(compiler, (*level, *define), source_path, obj),
                                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
                          for level, define, obj in zip(levels, defines, objects)]
         except OSError as error:
@@ -391,9 +410,7 @@ def _build(compiler: CCompiler, levels: list[tuple[str, ...]], source: str, targ
                   for process, error in zip(processes, errors) if process.returncode]
         built = Path(work) / "model.so"
         if not failed:
-            undefined = ["-undefined", "dynamic_lookup"] if sys.platform == "darwin" else []
-            link = subprocess.run([*compiler.command, "-shared", "-pthread", *undefined, "-o", str(built),
-                                   *map(str, objects), "-lm"], capture_output=True, text=True)
+            link = subprocess.run(_link_command(compiler, objects, built), capture_output=True, text=True)
             failed = [f"exit status {link.returncode} (linking)\n{link.stderr[-4000:]}"] if link.returncode else []
         if failed or not built.is_file():
             output = failed[0] if failed else "no library was written"
