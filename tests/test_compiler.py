@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import shutil
 import subprocess
 import sys
 import warnings
@@ -132,3 +133,19 @@ def test_the_compiler_is_part_of_the_library_key(tmp_path, monkeypatch):
     with pytest.warns(CompilerWarning, match="using zig cc"):
         zig = codegen.compile_shared_library(source)
     assert zig != system and zig.is_file() and system.is_file()
+
+
+def test_a_compiler_found_later_on_the_list_is_used_quietly(tmp_path, monkeypatch):
+    system = codegen.c_compiler()
+    if system is None or system.name == "zig cc":
+        pytest.skip("no system C compiler")
+    (tmp_path / "cc").symlink_to(system.command[0])  # gcc missing, cc there: nothing to report
+    for tool in ("as", "ld"):  # which gcc runs from PATH
+        if shutil.which(tool):
+            (tmp_path / tool).symlink_to(shutil.which(tool))
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.delenv("CC", raising=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        compiler = codegen.c_compiler()
+    assert compiler.name == "cc" and compiler.command == (str(tmp_path / "cc"), *system.command[1:])

@@ -126,6 +126,7 @@ class CacheWarning(KronlagWarning):
 
 
 class CompilerWarning(KronlagWarning):
-    """The C compiler kronlag chose is not the first one it looked for (reported once per process): ``$CC``
-    does not work (the line says why), no compiler works but ``zig cc`` of the ``ziglang`` package, or none
-    at all (the ``"auto"`` backend is then the Python one)."""
+    """How kronlag chose its C compiler, reported once per process where it matters: a compiler found
+    does not work (``$CC=/bin/false``: the line says why), ``zig cc`` of the ``ziglang`` package is used
+    because no other is found or works, or there is none at all (the ``"auto"`` backend is then the
+    Python one)."""

@@ -98,16 +98,19 @@ def _ziglang_command() -> tuple[str, ...] | None:
 
 
 #: A compiler looked for: its name, the command that runs it (None: not found) and what it is called in reports.
-_Candidate = tuple[str, "tuple[str, ...] | None", str]
+_Candidate = tuple[str, tuple[str, ...] | None, str]
 
 
 def _candidates() -> tuple[_Candidate, ...]:
     """The compilers in the order they are tried (:func:`c_compiler`)."""
-    cc = shlex.split(os.environ.get("CC") or "")
+    try:
+        cc = shlex.split(os.environ.get("CC") or "")
+    except ValueError:  # an unbalanced quote: taken as one word, not found
+        cc = [os.environ["CC"]]
     programs = [("$CC", cc, f"$CC={os.environ['CC']}")] if cc else []
     programs += [(name, [name], name) for name in ("gcc", "cc")]
-    candidates = tuple((name, (shutil.which(words[0]), *words[1:]) if shutil.which(words[0]) else None, label)
-                       for name, words, label in programs)
+    found = [(name, shutil.which(words[0]), words[1:], label) for name, words, label in programs]
+    candidates = tuple((name, (path, *arguments) if path else None, label) for name, path, arguments, label in found)
     return candidates + ((_ZIG, _ziglang_command(), "the ziglang package"),)
 
 
@@ -116,10 +119,10 @@ def c_compiler() -> CCompiler | None:
     links a small shared library, else ``zig cc`` of the ``ziglang`` package (``pip install
     kronlag[compiler]``), else None.
 
-    Each compiler is tried once per process.  The choice is reported once with a
-    :class:`~kronlag.core.errors.CompilerWarning` when it is not the first one looked for: a ``$CC``
-    that does not work (one line saying why), ``zig cc`` used because no other works, or no compiler
-    at all (the ``"auto"`` backend is then the Python one).
+    Each compiler is tried once per process.  The choice is reported once, in one line, with a
+    :class:`~kronlag.core.errors.CompilerWarning` when a compiler found does not work (``$CC=/bin/false``:
+    saying why), when ``zig cc`` is used because no other is found or works, or when there is no
+    compiler at all (the ``"auto"`` backend is then the Python one).
     """
     return _choose(_candidates())[0]
 
@@ -129,6 +132,7 @@ def _choose(candidates: tuple[_Candidate, ...]) -> tuple[CCompiler | None, str]:
     """The first of ``candidates`` that works, reported as :func:`c_compiler` says, and what became of
     those tried before it."""
     failures: list[str] = []
+    broken = False  # a compiler was found that does not work (not only missing ones)
     for name, command, label in candidates:
         if command is None:
             failures.append(f"{label}: not installed (pip install kronlag[compiler])" if name == _ZIG
@@ -137,13 +141,13 @@ def _choose(candidates: tuple[_Candidate, ...]) -> tuple[CCompiler | None, str]:
         compiler, problem = _probe(name, command)
         if compiler is not None:
             if name == _ZIG:
-                none = "no working C compiler" if any("does not work" in line for line in failures) else "no C compiler"
-                warnings.warn(f"{none} found ({'; '.join(failures)}); using zig cc from the ziglang package "
-                              f"({compiler.version})", CompilerWarning, stacklevel=3)
-            elif failures:
+                warnings.warn(f"no {'working ' * broken}C compiler found ({'; '.join(failures)}); using zig cc from "
+                              f"the ziglang package ({compiler.version})", CompilerWarning, stacklevel=3)
+            elif broken:
                 warnings.warn(f"{'; '.join(failures)}; using {compiler}", CompilerWarning, stacklevel=3)
             return compiler, "; ".join(failures)
         failures.append(f"{label} does not work: {problem}")
+        broken = True
     warnings.warn(f"no working C compiler found ({'; '.join(failures)}): the C backend is not available, "
                   "the (slower) Python backend is used", CompilerWarning, stacklevel=3)
     return None, "; ".join(failures)
