@@ -153,7 +153,7 @@ def test_c_source_is_self_contained_and_matches_the_interface(tmp_path):
     source = tmp_path / "model.c"
     source.write_text(model.c_source)
     library = tmp_path / "model.so"
-    subprocess.run([codegen.c_compiler(), "-O1", "-shared", "-fPIC", "-o", str(library), str(source), "-lm"],
+    subprocess.run([*codegen.c_compiler().command, "-O1", "-shared", "-fPIC", "-o", str(library), str(source), "-lm"],
                    check=True)
     function = ctypes.CDLL(str(library)).kronlag_forward_dynamics
     double_p = ctypes.POINTER(ctypes.c_double)

@@ -24,6 +24,7 @@ from kronlag.app.commands import method_help
 from kronlag.app.workflows import inverse_dynamics_along, parse_drive
 from kronlag.model.builtin import example_path, load_example, resolve_model
 from kronlag.model.modelfile import load_model, loads_model
+from kronlag.numeric import codegen
 from kronlag.numeric.reactions import Reaction, multiplier_units
 from kronlag.numeric.tolerances import ZERO_EIGENVALUE_RTOL
 from kronlag.simulation import METHODS
@@ -255,7 +256,9 @@ def test_check_refuses_an_initial_state_that_cannot_be_assembled(capsys, tmp_pat
 def test_version(capsys):
     code, out, _ = run(capsys, "--version")
     assert code == 0
-    assert out.strip() == f"kronlag {kronlag.__version__}" == f"kronlag {importlib.metadata.version('kronlag')}"
+    version, compiler = out.strip().splitlines()
+    assert version == f"kronlag {kronlag.__version__}" == f"kronlag {importlib.metadata.version('kronlag')}"
+    assert compiler == f"C compiler: {codegen.c_compiler()}"
 
 
 def _subparsers(parser):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import ast
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -198,7 +199,7 @@ def test_truncated_or_replaced_library_is_rebuilt_not_loaded(tmp_path):
     assert library.read_bytes() == content
     # replaced by another library (valid, but not what was built from this source)
     other = tmp_path / "other"
-    subprocess.run([codegen.c_compiler(), "-shared", "-fPIC", "-o", str(other), "-x", "c", "-"],
+    subprocess.run([*codegen.c_compiler().command, "-shared", "-fPIC", "-o", str(other), "-x", "c", "-"],
                    input="int kronlag_dynamics;\n", text=True, check=True)
     shutil.copyfile(other, library)
     assert build_double_pendulum(cache) == expected
@@ -228,16 +229,22 @@ def test_complex_or_infinite_constant_is_a_model_error(constant, kind):
 # -- a compiler that fails --------------------------------------------------------------------
 
 
+@needs_compiler
 def test_failing_compiler_falls_back_to_python_with_a_warning(tmp_path, monkeypatch):
+    # a compiler that works (it builds the test library of codegen.c_compiler) but fails on the model's code
+    failing = tmp_path / "failing-cc"
+    system = shlex.join(codegen.c_compiler().command)
+    failing.write_text(f'#!/bin/sh\ncase "$*" in *model.c*) exit 1;; esac\nexec {system} "$@"\n')
+    failing.chmod(0o755)
     monkeypatch.setenv("KRONLAG_CACHE", str(tmp_path))
-    monkeypatch.setenv("CC", "/bin/false")
+    monkeypatch.setenv("CC", str(failing))
     eom = derived("four_bar")
     with pytest.warns(RuntimeWarning, match="C compiler failed.*Python backend"):
         model = eom.numeric(FOUR_BAR)
     assert model.backend == "python"
     q = np.array([np.pi / 2, 0.5, 1.0])
     np.testing.assert_allclose(model.M(q), eom.numeric(FOUR_BAR, backend="python").M(q), rtol=0, atol=0)
-    with pytest.raises(codegen.CompilerError, match="/bin/false"):
+    with pytest.raises(codegen.CompilerError, match="failing-cc"):
         eom.numeric(FOUR_BAR, backend="c")
 
 

@@ -27,6 +27,7 @@ from collections.abc import Callable, Sequence
 
 from .. import __version__
 from ..core.errors import CompilerError, InputError, NumericalError
+from ..numeric.codegen import c_compiler
 from . import analysis_commands, commands
 from .outputs import IncompleteRun, RunInterrupted
 
@@ -68,11 +69,23 @@ def plain_text(text: str) -> str:
     return "\n\n".join(textwrap.fill(" ".join(paragraph.split()), 79) for paragraph in plain.strip().split("\n\n"))
 
 
+class _Version(argparse.Action):
+    """``--version``: the installed version and the C compiler kronlag uses (found on first use)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: object):
+        super().__init__(option_strings, dest, nargs=0, help="show the version and the C compiler used, and exit")
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: object) -> None:
+        compiler = c_compiler() or "none found, the Python backend is used (pip install kronlag[compiler])"
+        print(f"kronlag {__version__}\nC compiler: {compiler}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``kronlag`` argument parser."""
     parser = argparse.ArgumentParser(prog="kronlag", description=plain_text(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--version", action="version", version=f"kronlag {__version__}")
+    parser.add_argument("--version", action=_Version)
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def command(name: str, handler: Callable[[argparse.Namespace], None], summary: str,

@@ -41,6 +41,7 @@ __all__ = [
     "InitialStateWarning",
     "DrivesNotAppliedWarning",
     "CacheWarning",
+    "CompilerWarning",
 ]
 
 
@@ -122,3 +123,10 @@ class DrivesNotAppliedWarning(KronlagWarning):
 class CacheWarning(KronlagWarning):
     """The cache directory of compiled code cannot be used (not the user's alone, not writable, or a
     library there does not carry its key): a private temporary directory is used instead."""
+
+
+class CompilerWarning(KronlagWarning):
+    """How kronlag chose its C compiler, reported once per process where it matters: a compiler found
+    does not work (``$CC=/bin/false``: the line says why), ``zig cc`` of the ``ziglang`` package is used
+    because no other is found or works, or there is none at all (the ``"auto"`` backend is then the
+    Python one)."""

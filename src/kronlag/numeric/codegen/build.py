@@ -7,19 +7,24 @@ import _ctypes
 import atexit
 import ctypes
 import hashlib
+import importlib
+import importlib.metadata
 import os
+import shlex
 import shutil
 import stat
 import subprocess
 import sys
 import tempfile
 import warnings
+from dataclasses import dataclass, replace
+from functools import lru_cache
 from pathlib import Path
 
-from ...core.errors import CacheWarning, CompilerError
+from ...core.errors import CacheWarning, CompilerError, CompilerWarning
 
-__all__ = ["c_compiler", "cache_directory", "compile_shared_library", "load_shared_library", "C_LARGE_SOURCE",
-           "KEY_FUNCTION"]
+__all__ = ["CCompiler", "c_compiler", "cache_directory", "compile_shared_library", "load_shared_library",
+           "C_LARGE_SOURCE", "KEY_FUNCTION"]
 
 #: The function every compiled library exports, ``const char *kronlag_library_key(void)``: the key in
 #: its file name, checked after loading (a library is bound to the source it was built from).
@@ -37,13 +42,157 @@ _SOLVER_FLAGS = ("-O3", "-DKRONLAG_WIDE_LOOPS")
 #: (closed_chain(30, "relative"): 13 s against 8 s, the kernel 15.5 us either way).
 C_LARGE_SOURCE = 100_000
 _LARGE_KERNEL_OPTIMIZATION = "-O1"
+#: The name under which the C compiler of the ``ziglang`` package is reported and chosen.
+_ZIG = "zig cc"
+#: Flags of one compiler besides the common ones, by :attr:`CCompiler.name`, when compiling and when
+#: linking (zig links a C runtime built for these flags, once: the probe's).  ``zig cc`` compiles
+#: for the build machine's own CPU (a library cached in a home directory shared with an older
+#: machine would not run there, and FMA contraction would round unlike GCC's baseline build),
+#: with debug information and frame pointers unless told otherwise; these flags make it build as
+#: GCC does by default.
+_COMPILER_FLAGS = {_ZIG: ("-mcpu=baseline", "-g0", "-fomit-frame-pointer")}
+_PROBE_SOURCE = "#include <math.h>\ndouble kronlag_probe(double x) { return sqrt(x) + 1.0; }\n"
+#: Seconds a compiler may take on the probe (zig builds its C runtime once, in about 30 s).
+_PROBE_TIMEOUT = 600
 
-def c_compiler() -> str | None:
-    """Path of the C compiler (``$CC``, else ``gcc``, else ``cc``), or None."""
-    for candidate in (os.environ.get("CC"), "gcc", "cc"):
-        if candidate and shutil.which(candidate):
-            return shutil.which(candidate)
-    return None
+
+@dataclass(frozen=True)
+class CCompiler:
+    """A C compiler that compiles and links a shared library on this machine (:func:`c_compiler`).
+
+    Attributes
+    ----------
+    name : str
+        ``"$CC"``, ``"gcc"``, ``"cc"`` or ``"zig cc"`` (the compiler of the ``ziglang`` package).
+    command : tuple of str
+        The command line that runs it, before the arguments.
+    version : str
+        The first line of its ``--version``.
+    flags : tuple of str
+        Its own compile flags, besides those every compiler gets (:data:`_COMPILER_FLAGS`).
+    """
+
+    name: str
+    command: tuple[str, ...]
+    version: str
+    flags: tuple[str, ...] = ()
+
+    @property
+    def identity(self) -> str:
+        """What the key of a library built by this compiler includes: libraries of two compilers never mix."""
+        return "\0".join((self.name, *self.command, self.version, *self.flags))
+
+    def __str__(self) -> str:
+        return f"{self.name} ({' '.join(self.command)}; {self.version})"
+
+
+def _ziglang_command() -> tuple[str, ...] | None:
+    """The ``zig cc`` of the ``ziglang`` package, run as its binary (no Python start per compile), or None."""
+    try:
+        package = importlib.import_module("ziglang")
+    except ImportError:
+        return None
+    directory = Path(package.__file__).parent
+    binary = next((path for path in (directory / "zig", directory / "zig.exe") if path.is_file()), None)
+    return (str(binary), "cc") if binary else None
+
+
+#: A compiler looked for: its name, the command that runs it (None: not found) and what it is called in reports.
+_Candidate = tuple[str, tuple[str, ...] | None, str]
+
+
+def _candidates() -> tuple[_Candidate, ...]:
+    """The compilers in the order they are tried (:func:`c_compiler`)."""
+    try:
+        cc = shlex.split(os.environ.get("CC") or "")
+    except ValueError:  # an unbalanced quote: taken as one word, not found
+        cc = [os.environ["CC"]]
+    programs = [("$CC", cc, f"$CC={os.environ['CC']}")] if cc else []
+    programs += [(name, [name], name) for name in ("gcc", "cc")]
+    found = [(name, shutil.which(words[0]), words[1:], label) for name, words, label in programs]
+    candidates = tuple((name, (path, *arguments) if path else None, label) for name, path, arguments, label in found)
+    return candidates + ((_ZIG, _ziglang_command(), "the ziglang package"),)
+
+
+def c_compiler() -> CCompiler | None:
+    """The C compiler kronlag uses: the first of ``$CC``, ``gcc`` and ``cc`` (on PATH) that compiles and
+    links a small shared library, else ``zig cc`` of the ``ziglang`` package (``pip install
+    kronlag[compiler]``), else None.
+
+    Each compiler is tried once per process.  The choice is reported once, in one line, with a
+    :class:`~kronlag.core.errors.CompilerWarning` when a compiler found does not work (``$CC=/bin/false``:
+    saying why), when ``zig cc`` is used because no other is found or works, or when there is no
+    compiler at all (the ``"auto"`` backend is then the Python one).
+    """
+    return _choose(_candidates())[0]
+
+
+@lru_cache(maxsize=None)
+def _choose(candidates: tuple[_Candidate, ...]) -> tuple[CCompiler | None, str]:
+    """The first of ``candidates`` that works, reported as :func:`c_compiler` says, and what became of
+    those tried before it."""
+    failures: list[str] = []
+    broken = False  # a compiler was found that does not work (not only missing ones)
+    for name, command, label in candidates:
+        if command is None:
+            failures.append(f"{label}: not installed (pip install kronlag[compiler])" if name == _ZIG
+                            else f"{label}: not on PATH")
+            continue
+        compiler, problem = _probe(name, command)
+        if compiler is not None:
+            if name == _ZIG:
+                warnings.warn(f"no {'working ' * broken}C compiler found ({'; '.join(failures)}); using zig cc from "
+                              f"the ziglang package ({compiler.version})", CompilerWarning, stacklevel=3)
+            elif broken:
+                warnings.warn(f"{'; '.join(failures)}; using {compiler}", CompilerWarning, stacklevel=3)
+            return compiler, "; ".join(failures)
+        failures.append(f"{label} does not work: {problem}")
+        broken = True
+    warnings.warn(f"no working C compiler found ({'; '.join(failures)}): the C backend is not available, "
+                  "the (slower) Python backend is used", CompilerWarning, stacklevel=3)
+    return None, "; ".join(failures)
+
+
+@lru_cache(maxsize=None)
+def _probe(name: str, command: tuple[str, ...]) -> tuple[CCompiler | None, str]:
+    """``command`` as a :class:`CCompiler` if it compiles and links a small shared library as
+    :func:`_build` does, else None and why."""
+    compiler = CCompiler(name, command, "", _COMPILER_FLAGS.get(name, ()))
+    with tempfile.TemporaryDirectory(prefix="kronlag-probe-") as work:
+        source, probe, library = Path(work) / "probe.c", Path(work) / "probe.o", Path(work) / "probe.so"
+        source.write_text(_PROBE_SOURCE)
+        try:
+            for step in (_compile_command(compiler, (_OPTIMIZATION,), source, probe),
+                         _link_command(compiler, [probe], library)):
+                build = subprocess.run(step, capture_output=True, text=True, stdin=subprocess.DEVNULL,
+                                       timeout=_PROBE_TIMEOUT)
+                if build.returncode:
+                    break
+            version = subprocess.run([*command, "--version"], capture_output=True, text=True,
+                                     stdin=subprocess.DEVNULL, timeout=_PROBE_TIMEOUT)
+        except (OSError, subprocess.TimeoutExpired) as error:
+            return None, str(error)
+        if build.returncode or not library.is_file():
+            last_line = (build.stderr.strip().splitlines() or ["no library was written"])[-1]
+            return None, f"exit status {build.returncode} building a test library ({last_line})"
+    first_line = (version.stdout.strip().splitlines() or ["unknown version"])[0]
+    if name == _ZIG:
+        first_line = f"ziglang {importlib.metadata.version('ziglang')}, {first_line}"
+    return replace(compiler, version=first_line), ""
+
+
+def _compile_command(compiler: CCompiler, flags: tuple[str, ...], source: Path, output: Path) -> list[str]:
+    """The command compiling ``source`` into the object ``output`` with ``flags`` (optimization, defines)."""
+    return [*compiler.command, *flags, *_CFLAGS, *compiler.flags, "-c", "-o", str(output), str(source)]
+
+
+def _link_command(compiler: CCompiler, objects: list[Path], output: Path) -> list[str]:
+    """The command linking ``objects`` into the shared library ``output``, its undefined symbols
+    resolved at load time (the SUNDIALS calls of the compiled drivers); with an optimization level
+    because zig links a C runtime built for it (once per level: always the same one)."""
+    undefined = ["-undefined", "dynamic_lookup"] if sys.platform == "darwin" else []
+    return [*compiler.command, _OPTIMIZATION, *compiler.flags, "-shared", "-pthread", *undefined, "-o", str(output),
+            *map(str, objects), "-lm"]
 
 
 def cache_directory() -> Path:
@@ -154,15 +303,17 @@ def _keyed_source(source: str, key: str) -> str:
             f"const char *{KEY_FUNCTION}(void) {{ return \"{key}\"; }}\n#endif\n")
 
 
-def _build_plan(source: str, parts: int) -> tuple[str, list[tuple[str, ...]], str]:
-    """The compiler, the optimization flags of each part and the library's key (a hash of them and the source)."""
-    compiler = c_compiler()
+def _build_plan(source: str, parts: int) -> tuple[CCompiler, list[tuple[str, ...]], str]:
+    """The compiler, the optimization flags of each part and the library's key (a hash of them, the
+    compiler's identity and the source)."""
+    compiler, failures = _choose(_candidates())
     if compiler is None:
-        raise CompilerError("the C backend needs a C compiler (gcc or cc on PATH, or $CC); "
+        raise CompilerError(f"the C backend needs a working C compiler ({failures}); "
                             "use backend='python'")
     kernel_level = _LARGE_KERNEL_OPTIMIZATION if len(source) > C_LARGE_SOURCE else _OPTIMIZATION
     levels = [_SOLVER_FLAGS] + [(kernel_level,)] * (parts - 1) if parts > 1 else [(_OPTIMIZATION,)]
-    key = hashlib.sha256("\0".join((compiler, *_CFLAGS, *map(" ".join, levels), source)).encode()).hexdigest()[:32]
+    facts = (compiler.identity, *_CFLAGS, *map(" ".join, levels), source)
+    key = hashlib.sha256("\0".join(facts).encode()).hexdigest()[:32]
     return compiler, levels, key
 
 
@@ -244,16 +395,16 @@ def _load_keyed(path: Path, key: str) -> ctypes.CDLL | None:
     return None
 
 
-def _build(compiler: str, levels: list[tuple[str, ...]], source: str, target: Path) -> Path:
+def _build(compiler: CCompiler, levels: list[tuple[str, ...]], source: str, target: Path) -> Path:
     """Compile ``source`` (in parts, one per entry of ``levels``) into ``target``, then write its digest."""
     parts = len(levels)
     with tempfile.TemporaryDirectory(dir=target.parent) as work:
         source_path = Path(work) / "model.c"
         source_path.write_text(source)
         objects = [Path(work) / f"part{i}.o" for i in range(parts)]
-        defines = [[f"-DKRONLAG_PART={i}", f"-DKRONLAG_PARTS={parts}"] if parts > 1 else [] for i in range(parts)]
+        defines = [(f"-DKRONLAG_PART={i}", f"-DKRONLAG_PARTS={parts}") if parts > 1 else () for i in range(parts)]
         try:
-            processes = [subprocess.Popen([compiler, *level, *_CFLAGS, *define, "-c", "-o", str(obj), str(source_path)],
+            processes = [subprocess.Popen(_compile_command(compiler, (*level, *define), source_path, obj),
                                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
                          for level, define, obj in zip(levels, defines, objects)]
         except OSError as error:
@@ -263,9 +414,7 @@ def _build(compiler: str, levels: list[tuple[str, ...]], source: str, target: Pa
                   for process, error in zip(processes, errors) if process.returncode]
         built = Path(work) / "model.so"
         if not failed:
-            undefined = ["-undefined", "dynamic_lookup"] if sys.platform == "darwin" else []
-            link = subprocess.run([compiler, "-shared", "-pthread", *undefined, "-o", str(built), *map(str, objects),
-                                   "-lm"], capture_output=True, text=True)
+            link = subprocess.run(_link_command(compiler, objects, built), capture_output=True, text=True)
             failed = [f"exit status {link.returncode} (linking)\n{link.stderr[-4000:]}"] if link.returncode else []
         if failed or not built.is_file():
             output = failed[0] if failed else "no library was written"
