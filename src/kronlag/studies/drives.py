@@ -25,7 +25,7 @@ along its target), or those of actuated coordinates that replace the drives
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -34,11 +34,22 @@ import numpy as np
 from ..core.errors import AssemblyError, InputError, ModelError
 from ..core.limits import MAX_OUTPUT_POINTS
 from ..numeric.linalg import least_norm
-from ..numeric.reactions import Reaction, column_unit, joint_reaction, multiplier_labels, reaction_columns
+from ..numeric.reactions import (
+    GENERALIZED_FORCE_UNITS,
+    Reaction,
+    column_unit,
+    joint_reaction,
+    multiplier_labels,
+    multiplier_units,
+    reaction_columns,
+)
 from ..numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
+from ..simulation.labelled import LabelledArrays, multiplier_columns
 from ..simulation.trajectory import ColumnExport
 
 if TYPE_CHECKING:
+    import xarray
+
     from ..numeric.numeric_model import NumericModel
 
 __all__ = ["Kinematics", "InverseDynamicsRun", "kinematic_analysis", "inverse_dynamics", "BRANCH_RATIO"]
@@ -90,6 +101,26 @@ class Kinematics(ColumnExport):
 
     def _metadata(self) -> dict[str, Any]:
         return {"message": self.message}
+
+    def to_xarray(self, *, units: Mapping[str, str] | None = None) -> xarray.Dataset:
+        """The analysis as an :class:`xarray.Dataset` (needs xarray): ``q``, ``qd``, ``qdd`` over
+        ``time`` and ``coordinate``, the points' ``point_position``, ``point_velocity`` and
+        ``point_acceleration``
+        over ``time``, ``point`` and ``axis``; ``message`` and ``success`` as attributes.  ``units``
+        as :meth:`kronlag.Trajectory.to_xarray` takes them."""
+        return self._arrays(units).dataset({"message": self.message, "success": int(self.success)})
+
+    def _arrays(self, units: Mapping[str, str] | None) -> LabelledArrays:
+        arrays = LabelledArrays(self.t, units)
+        arrays.coordinates(self.coordinate_names, self.q, self.qd, self.qdd)
+        if self.points:
+            states = list(self.points.values())
+            arrays.dimension("point", list(self.points))
+            arrays.dimension("axis", list("xyz"[:states[0]["position"].shape[1]]))
+            for quantity in ("position", "velocity", "acceleration"):
+                arrays.variable(f"point_{quantity}", ("time", "point", "axis"),
+                                np.stack([state[quantity] for state in states], axis=1))
+        return arrays
 
     def _reported(self) -> dict[str, np.ndarray]:
         """The columns of :meth:`report`: time and coordinates."""
@@ -146,14 +177,35 @@ class InverseDynamicsRun(Kinematics):
         return joint_reaction(self.model, name, self.t, self.q, self.lam, frame=frame)
 
     def columns(self) -> dict[str, np.ndarray]:
-        """The :class:`Kinematics` columns, then ``force_<actuated>``, ``lambda<j>``, ``mu<k>`` and the
-        joints' reactions."""
+        """The :class:`Kinematics` columns, then ``force_<actuated>``, the multipliers by constraint name
+        (``lambda[<constraint>]``, ``mu[<constraint>]``; ``lambda<j>``, ``mu<k>`` for a run without its
+        model) and the joints' reactions."""
+        multipliers = (multiplier_columns(self.model.equations.system) if self.model is not None else
+                       [f"lambda{j + 1}" for j in range(self.lam.shape[1])]
+                       + [f"mu{k + 1}" for k in range(self.mu.shape[1])])
         blocks = [([f"force_{n}" for n in self.actuated], self.forces),
-                  ([f"lambda{j + 1}" for j in range(self.lam.shape[1])], self.lam),
-                  ([f"mu{k + 1}" for k in range(self.mu.shape[1])], self.mu)]
+                  (multipliers, np.hstack([self.lam, self.mu]))]
         columns = super().columns()
         columns.update({label: values[:, i] for labels, values in blocks for i, label in enumerate(labels)})
         return columns | self.reactions
+
+    def to_xarray(self, *, units: Mapping[str, str] | None = None) -> xarray.Dataset:
+        """The run as an :class:`xarray.Dataset` (needs xarray): the :class:`Kinematics` variables, the
+        driving forces ``force`` over ``time`` and ``actuated`` (the actuated coordinates or the drives'
+        names; ``N*m`` on an angle, ``N`` on a length, when the units tell), ``lambda`` and ``mu`` by
+        constraint, and the joints' ``reaction_force`` and ``reaction_couple`` as
+        :meth:`kronlag.Trajectory.to_xarray` has them.  ``units`` as that method takes them."""
+        arrays = self._arrays(units)
+        system = self.model.equations.system if self.model is not None else None
+        force_units = multiplier_units(system, arrays.units) if system is not None and arrays.si else {}
+        force_units |= {name: unit for name in self.actuated
+                        if (unit := GENERALIZED_FORCE_UNITS.get(arrays.units.get(name, ""))) and arrays.si}
+        arrays.dimension("actuated", list(self.actuated))
+        arrays.variable("force", ("time", "actuated"), self.forces, [force_units.get(name) for name in self.actuated])
+        arrays.multipliers(system, self.lam, self.mu)
+        if self.model is not None:
+            arrays.reactions(self.model, self.t, self.q, self.lam)
+        return arrays.dataset({"message": self.message, "success": int(self.success)})
 
     def _reported(self) -> dict[str, np.ndarray]:
         """The columns of :meth:`report`: the forces, the multipliers of the constraints that are
