@@ -76,7 +76,7 @@ class LabelledArrays:
         self.data_vars: dict[str, Any] = {}
         self.dimension("time", np.asarray(t, dtype=float), unit=self.units.get("t"))
 
-    def dimension(self, name: str, labels: Sequence[Any], *, unit: str | None = None) -> None:
+    def dimension(self, name: str, labels: Sequence[Any] | np.ndarray, *, unit: str | None = None) -> None:
         """A dimension ``name`` whose coordinate is ``labels``."""
         self.coords[name] = (name, np.asarray(labels), {"units": unit} if unit else {})
 

@@ -120,6 +120,10 @@ class ColumnExport:
     """Export of a result to files: a subclass defines ``columns()`` (named arrays of shape (N,))
     and ``_metadata()`` (the run's message and counters)."""
 
+    if TYPE_CHECKING:  # the subclass's
+        def columns(self) -> dict[str, np.ndarray]: ...
+        def _metadata(self) -> dict[str, Any]: ...
+
     def to_csv(self, path: str | PathLike) -> None:
         """Write the columns to a comma-separated file with a one-line header of column names (a name
         with a comma in it, as a constraint's may have, quoted)."""
@@ -131,7 +135,8 @@ class ColumnExport:
 
     def to_npz(self, path: str | PathLike) -> None:
         """Write the columns and the run's metadata (``message``, ...) to a NumPy ``.npz`` archive."""
-        np.savez(path, **self.columns(), **{key: np.asarray(value) for key, value in self._metadata().items()})
+        arrays = {**self.columns(), **{key: np.asarray(value) for key, value in self._metadata().items()}}
+        np.savez(path, allow_pickle=False, **arrays)
 
     def to_dataframe(self) -> pandas.DataFrame:
         """The columns as a :class:`pandas.DataFrame` (needs pandas)."""

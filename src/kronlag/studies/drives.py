@@ -132,8 +132,7 @@ class Kinematics(ColumnExport):
     def report(self, *, rows: int = 11) -> str:
         """A table of the main columns at up to ``rows`` evenly spaced times, and the message."""
         columns = self._reported()
-        picks = (np.unique(np.linspace(0, len(self.t) - 1, min(rows, len(self.t))).round().astype(int))
-                 if len(self.t) else [])
+        picks = np.unique(np.linspace(0, len(self.t) - 1, min(rows, len(self.t))).round().astype(int))
         widths = [max(12, len(name)) for name in columns]
         lines = ["  ".join(f"{name:>{width}}" for name, width in zip(columns, widths))]
         lines += ["  ".join(f"{values[i]:{width}.5g}" for values, width in zip(columns.values(), widths))
@@ -278,6 +277,7 @@ def _advance(model: NumericModel, state: tuple, time: float, tol: float, *, dept
     start, previous, speed, acceleration = state
     h = time - start
     predictor = previous + h * speed + h * h / 2 * acceleration
+    failure: AssemblyError | None = None
     try:
         q, qd = model.assemble(predictor, t=time, tol=tol)  # qd unique: solved afresh, no cancellation
         correction = np.max(np.abs(q - predictor))
@@ -285,8 +285,6 @@ def _advance(model: NumericModel, state: tuple, time: float, tol: float, *, dept
         close = correction <= BRANCH_RATIO * displacement + 1e3 * tol * (1 + np.max(np.abs(q)))
     except AssemblyError as error:
         close, failure = False, error
-    else:
-        failure = None
     if close:
         return time, q, qd, _accelerations(model, q, qd, time)
     if depth == _MAX_HALVINGS:
@@ -444,7 +442,7 @@ def inverse_dynamics(model: NumericModel, t, q_guess, *, actuated: Sequence[str]
     names = [item.name for item in system.constraints]
     drive_rows = [names.index(name) for name in system.drives]
     if actuated is None:
-        labels, constraints, columns = tuple(system.drives), None, ()
+        labels, constraints, columns = tuple(system.drives), None, tuple[str, ...]()
     else:
         labels, columns = tuple(str(name) for name in actuated), tuple(actuated)
         constraints = _mechanism_rows(model)
