@@ -141,3 +141,18 @@ def test_a_missing_xarray_is_named(engine_run, monkeypatch):
     monkeypatch.setitem(sys.modules, "xarray", None)
     with pytest.raises(ImportError, match=r"needs xarray: pip install xarray \(or 'kronlag\[xarray\]'\)"):
         engine_run.to_xarray()
+
+
+def test_the_command_line_writes_netcdf_with_the_files_units(tmp_path):
+    from kronlag.app.cli import main
+
+    path = tmp_path / "run.nc"
+    assert main(["simulate", "slider_crank_engine", "--t-end", "0.02", "--points", "5", "--output", str(path)]) == 0
+    with xr.open_dataset(path) as data:
+        assert data.sizes["time"] == 5 and data["time"].attrs["units"] == "s"
+        assert data["q_units"].sel(coordinate="theta_crank").item() == "rad"
+        assert data["reaction_force"].attrs["units"] == "N" and data.attrs["status"] == 0
+    inverse = tmp_path / "inverse.nc"
+    assert main(["inverse", "four_bar", "--drive", "q1=2*t", "--t-end", "0.1", "--output", str(inverse)]) == 0
+    with xr.open_dataset(inverse) as data:
+        assert data["actuated"].values.tolist() == ["q1"] and data["force"].attrs["units"] == "N*m"
