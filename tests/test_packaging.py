@@ -24,11 +24,12 @@ from kronlag.numeric.accessors import ACCESSOR_MATRICES
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "src" / "kronlag"
 
-#: What pip prints when it cannot reach the package registry (then the test is skipped).
+#: What pip prints when it cannot reach the package registry (then the test is skipped): a failed
+#: connection, or no version at all of a requirement (a registry that answers lists some: a conflict fails).
 _UNREACHABLE = re.compile(r"Failed to establish a new connection|Temporary failure in name resolution|"
                           r"Network is unreachable|Max retries exceeded|Connection refused|ProxyError|"
-                          r"Read timed out|Could not find a version that satisfies the requirement|"
-                          r"No matching distribution found")
+                          r"Read timed out|Could not find a version that satisfies the requirement .*"
+                          r"\(from versions: none\)")
 
 #: A user's script: the public API as the README and the documentation use it, annotated.
 USER_SCRIPT = '''
