@@ -13,9 +13,9 @@ from __future__ import annotations
 import csv
 import enum
 import io
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
-from collections.abc import Mapping
 from os import PathLike
 from typing import TYPE_CHECKING, Any
 
@@ -197,7 +197,8 @@ class Trajectory(ColumnExport):
     (``q1, q2, ...``); their velocities (``q1d, ...``) and accelerations
     (``q1dd, ...``); the multipliers by constraint name, ``lambda[<constraint>]`` (e.g.
     ``lambda[loop x]``) and ``mu[<constraint>]``, as the plots label them; ``kinetic_energy``;
-    ``potential_energy``; ``position_residual1 .. position_residualr``; ``velocity_residual1 .. velocity_residual(r+s)``; then, for
+    ``potential_energy``; ``position_residual1 .. position_residualr``; ``velocity_residual1 ..
+    velocity_residual(r+s)``; then, for
     every joint of the system (:meth:`kronlag.System.add_joint`), its reaction in world
     components (:meth:`reaction`): ``<joint>.Fx, <joint>.Fy[, <joint>.Fz]`` and
     ``<joint>.Mz`` (planar) or ``<joint>.Mx, .My, .Mz`` (spatial).

@@ -66,6 +66,7 @@ DEFAULT_OUTCOMES: dict[str, Callable] = {
     "max_position_residual": _max_position_residual,
 }
 
+
 def _column_units(units: Mapping[str, str], coordinate_names: Sequence[str]) -> dict[str, str]:
     """The units of the table's columns that ``units`` (by name) determine: the swept parameters and
     coordinates, the speeds, the default outcomes and ``wall_time``."""
