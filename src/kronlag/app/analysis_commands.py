@@ -15,7 +15,6 @@ import numpy as np
 from ..core.errors import ModelError
 from ..model.builtin import resolve_model
 from ..model.modelfile import ModelFile
-from ..model.modelfile.units import si_unit
 from ..numeric.reactions import column_unit, multiplier_labels, reaction_columns
 from ..numeric.tolerances import ZERO_EIGENVALUE_RTOL
 from ..studies.linearization import LinearModel
@@ -128,8 +127,7 @@ def _column_labels(model: ModelFile, names: list[str]) -> dict[str, str]:
     """``name -> "name [unit]"`` for the swept names whose unit the file determines (parameters with a
     unit, coordinates by :func:`model_units`, their speeds per second); the others keep their name.  The
     values are SI: a parameter's label is the file's unit when it is an SI one (``N*m``), else the SI unit."""
-    units = {**model_units(model), **model.units}
-    units |= {name: text for name, text in model.file_units.items() if si_unit(text)[0].magnitude == 1}
+    units = model_units(model, parameters=True)
     coordinates = {q.name for q in model.system.coordinates}
     speeds = {f"{q}d": f"{units[q]}/{units['t']}" for q in coordinates if q in units and "t" in units}
     units |= speeds

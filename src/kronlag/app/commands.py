@@ -55,10 +55,15 @@ _FAILURE_HINTS = {
 _SMOOTH_TURN = np.pi / 3
 
 
-def _check_parquet(path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
-    if path.suffix == ".parquet" and not all(importlib.util.find_spec(name) for name in ("pandas", "pyarrow")):
-        raise ModelError(f"--output {path}: writing .parquet needs pandas and pyarrow (pip install pandas "
-                         "pyarrow); .csv and .npz need nothing more")
+#: The modules an --output format needs beyond kronlag's own dependencies, and the extra that brings them.
+_FORMAT_NEEDS = {".parquet": (("pandas", "pyarrow"), "parquet"), ".nc": (("xarray",), "xarray")}
+
+
+def _check_format(path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
+    needs, extra = _FORMAT_NEEDS.get(path.suffix, ((), ""))
+    if not all(importlib.util.find_spec(name) for name in needs):
+        raise ModelError(f"--output {path}: writing {path.suffix} needs {' and '.join(needs)} (pip install "
+                         f"{' '.join(needs)}, or kronlag[{extra}]); .csv and .npz need nothing more")
 
 
 def _check_animation(path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
@@ -73,11 +78,13 @@ def _check_animation(path: Path, arguments: argparse.Namespace, model: ModelFile
 
 def _save_trajectory(trajectory, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
     {".parquet": lambda: trajectory.to_dataframe().to_parquet(path), ".csv": lambda: trajectory.to_csv(path),
-     ".npz": lambda: trajectory.to_npz(path)}[path.suffix]()
+     ".npz": lambda: trajectory.to_npz(path),
+     ".nc": lambda: trajectory.to_xarray(units=model_units(model)).to_netcdf(path)}[path.suffix]()
 
 
 def _save_columns(run, path: Path, arguments: argparse.Namespace, model: ModelFile) -> None:
-    {".csv": lambda: run.to_csv(path), ".npz": lambda: run.to_npz(path)}[path.suffix]()
+    {".csv": lambda: run.to_csv(path), ".npz": lambda: run.to_npz(path),
+     ".nc": lambda: run.to_xarray(units=model_units(model)).to_netcdf(path)}[path.suffix]()
 
 
 #: The words ``--reactions`` takes besides joint names, as ``plot_trajectory(reactions=...)`` values.
@@ -128,16 +135,16 @@ def _plot_kinematics(run, path: Path, arguments: argparse.Namespace, model: Mode
     plot_kinematics(run, path=path, units=model_units(model))
 
 
-_SIMULATION_OUTPUTS = (OutputKind("--output", (".csv", ".npz", ".parquet"), _check_parquet, _save_trajectory),
+_SIMULATION_OUTPUTS = (OutputKind("--output", (".csv", ".npz", ".parquet", ".nc"), _check_format, _save_trajectory),
                        OutputKind("--plot", PLOT_SUFFIXES, _check_reactions, _plot_trajectory),
                        OutputKind("--animate", SUPPORTED_FORMATS, _check_animation, _animate))
 
 
-_INVERSE_OUTPUTS = (OutputKind("--output", (".csv", ".npz"), no_check, _save_columns),
+_INVERSE_OUTPUTS = (OutputKind("--output", (".csv", ".npz", ".nc"), _check_format, _save_columns),
                     OutputKind("--plot", PLOT_SUFFIXES, no_check, _plot_inverse))
 
 
-_KINEMATICS_OUTPUTS = (OutputKind("--output", (".csv", ".npz"), no_check, _save_columns),
+_KINEMATICS_OUTPUTS = (OutputKind("--output", (".csv", ".npz", ".nc"), _check_format, _save_columns),
                        OutputKind("--plot", PLOT_SUFFIXES, no_check, _plot_kinematics))
 
 
@@ -342,7 +349,8 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
                      "(default: kronlag.simulate's, which grows with the time span)")
     _add_grid_options(sub, f"a point every {_GRID_SPACING:g} of time, at least {_GRID_POINTS[0]} and at most "
                            f"{_GRID_POINTS[1]} points")
-    sub.add_argument("--output", metavar="FILE", help="save the trajectory (.csv, .npz or .parquet)")
+    sub.add_argument("--output", metavar="FILE", help="save the trajectory (.csv, .npz, .parquet or .nc: "
+                     "netCDF, labelled arrays with the model file's units)")
     sub.add_argument("--plot", metavar="FILE", help="save a figure of the time histories (.png, .pdf, .svg, .jpg), "
                      "with the reaction forces of the joints")
     sub.add_argument("--reactions", metavar="JOINTS", help="joints whose reactions --plot draws: all (default), "
@@ -366,7 +374,7 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
                               "(repeat for several, one per degree of freedom; default: the model's [[drives]])")
         sub.add_argument("--t-end", type=positive, help="final time (default: the model's [simulation] t_end)")
         _add_grid_options(sub, "101")
-        sub.add_argument("--output", metavar="FILE", help="save the results (.csv or .npz)")
+        sub.add_argument("--output", metavar="FILE", help="save the results (.csv, .npz or .nc: netCDF with units)")
         sub.add_argument("--plot", metavar="FILE", help=f"save a figure of the {outputs} (.png, .pdf, .svg, .jpg)")
     sub.add_argument("--actuated", metavar="Q1,Q2", help="the coordinates that carry the actuators, comma "
                      "separated (default: the driven coordinates); the drives then only prescribe the motion")

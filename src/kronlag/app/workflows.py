@@ -21,6 +21,7 @@ from ..core.errors import ModelError, NumericalError
 from ..core.kernels import ExpressionFunction
 from ..model.expressions import parse_expression
 from ..model.modelfile import ModelFile, PrescribedMotion
+from ..model.modelfile.units import si_unit
 from ..model.symbols import t
 from ..model.system import drive_name
 from ..numeric.tolerances import matrix_rank
@@ -213,8 +214,10 @@ def simulate_model(model: ModelFile, *, t_end: float | None = None, method: str 
 _TRIGONOMETRIC = (sp.sin, sp.cos, sp.tan)
 
 
-def model_units(model: ModelFile) -> dict[str, str]:
-    """Units the model file determines, by name: coordinates, ``"t"`` (time) and ``"energy"``.
+def model_units(model: ModelFile, *, parameters: bool = False) -> dict[str, str]:
+    """Units the model file determines, by name: coordinates, ``"t"`` (time) and ``"energy"``, and
+    with ``parameters`` every parameter with a unit (the file's unit when it is an SI one, ``N*m``,
+    else the SI unit its value is in: ``m`` for a length the file gives in ``mm``).
 
     Only what follows from the file is given; a quantity whose unit cannot be
     told is left out.  Coordinates: ``rad`` for one that is the argument of
@@ -250,6 +253,9 @@ def model_units(model: ModelFile) -> dict[str, str]:
     masses = units_of([body.mass for body in system.bodies])
     if masses == {"kg"} and length == "m" and units.get("t") == "s":
         units["energy"] = "J"
+    if parameters:
+        units |= model.units
+        units |= {name: text for name, text in model.file_units.items() if si_unit(text)[0].magnitude == 1}
     return units
 
 

@@ -5,7 +5,7 @@
 - :mod:`.projection`: Gauss-Newton onto ``Phi(q, t) = 0`` and the velocities onto ``B qd + c = 0``;
 - :mod:`.codegen`: kernels printed as Python or C, compiled and cached (``source``, ``python_backend``,
   ``c_backend``, ``build``, ``layouts``);
-- :mod:`.numeric_model`: :class:`NumericModel` (accessors, forward dynamics, batches);
+- :mod:`.numeric_model`: :class:`NumericModel` (accessors from :mod:`.accessors`, forward dynamics, batches);
 - :mod:`.inverse`, :mod:`.assembly`, :mod:`.reactions`: inverse dynamics, consistent initial states,
   named joint reactions.
 """

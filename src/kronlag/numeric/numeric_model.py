@@ -30,6 +30,7 @@ from ..core.errors import InputError, NumericalError, RedundantConstraintsWarnin
 from ..model.symbols import name_indices
 from ..symbolic import matrices as catalogue
 from . import codegen
+from .accessors import MatrixAccessors
 from .assembly import assemble
 from .codegen.layouts import split_terms
 from .inverse import solve_inverse_dynamics
@@ -59,7 +60,7 @@ _GROUP_OF = {kernel: group for group, kernels in _LIBRARY_GROUPS.items() for ker
 _DEPRECATED_BACKENDS = {"numpy": "python"}
 
 
-class NumericModel:
+class NumericModel(MatrixAccessors):
     """Compiled numeric form of an :class:`Equations` object (see :meth:`Equations.numeric`).
 
     All inputs are 1-D float arrays (``q``, ``qd``: shape (m,)); matrices are
@@ -189,7 +190,7 @@ class NumericModel:
         return kernel.split(library.evaluator(kernel.name, (kernel.size,))(t, q, qd, p))
 
     def _expression_library(self, group: str, matrices: Callable[[], Mapping[str, sp.MatrixBase]],
-                            extra: tuple[sp.Symbol, ...]) -> tuple[codegen.Kernel, codegen.PythonLibrary]:
+                            extra: tuple[sp.Symbol, ...]) -> tuple[codegen.Kernel, codegen.KernelLibrary]:
         """The kernel of ``group`` and its library, generated on first use (extra inputs after ``p``)."""
         key = f"expressions:{group}"
         library = self._libraries.get(key)
@@ -270,7 +271,7 @@ class NumericModel:
             raise InputError(f"t must be a number or have shape ({n},), got {times.shape}")
         return times, self._parameters.batch(times)
 
-    # -- matrices: one accessor per matrix of the catalogue (M, C, g, Phi, ...), defined below the class
+    # -- matrices: one accessor per matrix of the catalogue (M, C, g, Phi, ...), from MatrixAccessors
 
     def kinetic_energy(self, q, qd, t: float = 0.0) -> float:
         """``T = 1/2 qd^T M(q) qd``."""
@@ -561,8 +562,8 @@ class NumericModel:
                 "rank_rtol": self.rank_rtol}
 
     def __setstate__(self, state: dict) -> None:
-        self.__init__(state["equations"], state["parameters"], backend=state["backend"],
-                      rank_rtol=state.get("rank_rtol", RANK_RTOL))
+        NumericModel.__init__(self, state["equations"], state["parameters"], backend=state["backend"],
+                              rank_rtol=state.get("rank_rtol", RANK_RTOL))
 
     # -- static equilibrium and linearization (kronlag.studies) ---------------------------------
 
@@ -577,24 +578,3 @@ class NumericModel:
         from ..studies.linearization import linearize
 
         return linearize(self, q, qd, t=t, **options)
-
-
-
-def _accessor(entry: catalogue.EquationMatrix) -> Callable[..., np.ndarray]:
-    """The method ``model.<name>(q[, qd], t=0.0)`` of a matrix of the catalogue, with its docstring."""
-    name = entry.name
-    if entry.speeds:
-        def accessor(self: NumericModel, q, qd, t: float = 0.0) -> np.ndarray:
-            return self._evaluate(name, q, qd, t)
-    else:
-        def accessor(self: NumericModel, q, t: float = 0.0) -> np.ndarray:
-            return self._evaluate(name, q, None, t)
-    shape = f"({entry.rows},)" if entry.vector else f"({entry.rows}, {entry.columns})"
-    accessor.__name__ = accessor.__qualname__ = name
-    accessor.__doc__ = f"``{name}``: {entry.meaning}, shape {shape}."
-    return accessor
-
-
-for _entry in catalogue.MATRICES.values():
-    if _entry.accessor and _entry.name != "potential_energy":  # a float, see NumericModel.potential_energy
-        setattr(NumericModel, _entry.name, _accessor(_entry))

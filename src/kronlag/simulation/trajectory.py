@@ -10,7 +10,10 @@ with time along the first axis of every array, and exports it as columns.
 
 from __future__ import annotations
 
+import csv
 import enum
+import io
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
 from os import PathLike
@@ -20,8 +23,12 @@ import numpy as np
 
 from ..numeric.reactions import Reaction, joint_reaction, reaction_columns
 from .energy import nonconservative_work
+from .labelled import LabelledArrays, multiplier_columns
 
 if TYPE_CHECKING:
+    import pandas
+    import xarray
+
     from ..numeric.numeric_model import NumericModel
 
 __all__ = ["Trajectory", "SingularPassage", "Result"]
@@ -113,17 +120,25 @@ class ColumnExport:
     """Export of a result to files: a subclass defines ``columns()`` (named arrays of shape (N,))
     and ``_metadata()`` (the run's message and counters)."""
 
+    if TYPE_CHECKING:  # the subclass's
+        def columns(self) -> dict[str, np.ndarray]: ...
+        def _metadata(self) -> dict[str, Any]: ...
+
     def to_csv(self, path: str | PathLike) -> None:
-        """Write the columns to a comma-separated file with a one-line header of column names."""
+        """Write the columns to a comma-separated file with a one-line header of column names (a name
+        with a comma in it, as a constraint's may have, quoted)."""
         columns = self.columns()
         data = np.column_stack(list(columns.values())) if columns else np.zeros((0, 0))
-        np.savetxt(path, data, delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
+        header = io.StringIO()
+        csv.writer(header, lineterminator="").writerow(columns)
+        np.savetxt(path, data, delimiter=",", header=header.getvalue(), comments="", fmt="%.17g")
 
     def to_npz(self, path: str | PathLike) -> None:
         """Write the columns and the run's metadata (``message``, ...) to a NumPy ``.npz`` archive."""
-        np.savez(path, **self.columns(), **{key: np.asarray(value) for key, value in self._metadata().items()})
+        arrays = {**self.columns(), **{key: np.asarray(value) for key, value in self._metadata().items()}}
+        np.savez(path, allow_pickle=False, **arrays)
 
-    def to_dataframe(self):
+    def to_dataframe(self) -> pandas.DataFrame:
         """The columns as a :class:`pandas.DataFrame` (needs pandas)."""
         try:
             import pandas as pd
@@ -180,9 +195,10 @@ class Trajectory(ColumnExport):
     The export columns (:meth:`columns`, :meth:`to_csv`, :meth:`to_npz`,
     :meth:`to_dataframe`) are, in this order: ``t``; the coordinates by name
     (``q1, q2, ...``); their velocities (``q1d, ...``) and accelerations
-    (``q1dd, ...``); ``lambda1 .. lambdar``; ``mu1 .. mus``;
-    ``kinetic_energy``; ``potential_energy``; ``position_residual1 ..
-    position_residualr``; ``velocity_residual1 .. velocity_residual(r+s)``; then, for
+    (``q1dd, ...``); the multipliers by constraint name, ``lambda[<constraint>]`` (e.g.
+    ``lambda[loop x]``) and ``mu[<constraint>]``, as the plots label them; ``kinetic_energy``;
+    ``potential_energy``; ``position_residual1 .. position_residualr``; ``velocity_residual1 ..
+    velocity_residual(r+s)``; then, for
     every joint of the system (:meth:`kronlag.System.add_joint`), its reaction in world
     components (:meth:`reaction`): ``<joint>.Fx, <joint>.Fy[, <joint>.Fz]`` and
     ``<joint>.Mz`` (planar) or ``<joint>.Mx, .My, .Mz`` (spatial).
@@ -255,8 +271,7 @@ class Trajectory(ColumnExport):
             (list(names), self.q),
             ([f"{name}d" for name in names], self.qd),
             ([f"{name}dd" for name in names], self.qdd),
-            ([f"lambda{j + 1}" for j in range(self.lam.shape[1])], self.lam),
-            ([f"mu{k + 1}" for k in range(self.mu.shape[1])], self.mu),
+            (multiplier_columns(self.model.equations.system), np.hstack([self.lam, self.mu])),
             (["kinetic_energy"], self.kinetic_energy[:, None]),
             (["potential_energy"], self.potential_energy[:, None]),
             ([f"position_residual{j + 1}" for j in range(self.position_residual.shape[1])],
@@ -273,6 +288,39 @@ class Trajectory(ColumnExport):
         (N, 1 planar or N, 3 spatial) that body A exerts on body B at B's joint point, in
         world or B's body components; see :mod:`kronlag.numeric.reactions`."""
         return joint_reaction(self.model, name, self.t, self.q, self.lam, frame=frame)
+
+    def to_xarray(self, *, units: Mapping[str, str] | None = None) -> xarray.Dataset:
+        """The trajectory as an :class:`xarray.Dataset` over ``time`` (needs xarray).
+
+        Dimensions ``time``, ``coordinate`` (the coordinate names), ``constraint`` and
+        ``nonholonomic`` (the constraint names), and, for a system with joints, ``joint``,
+        ``axis`` and ``couple_axis``.  Variables ``q``, ``qd``, ``qdd`` (time, coordinate);
+        ``lambda`` and ``position_residual`` (time, constraint); ``velocity_residual``
+        (time, constraint: ``Phi_q qd``); ``mu`` and ``nonholonomic_residual`` (time,
+        nonholonomic: ``A qd + b``); ``kinetic_energy``, ``potential_energy`` (time); the
+        joints' reactions ``reaction_force`` and ``reaction_couple`` in world components
+        (:mod:`kronlag.simulation.labelled`).  The run's ``method``, ``status``, ``result``,
+        ``message``, counters and ``system`` are attributes of the dataset.
+
+        Parameters
+        ----------
+        units : mapping of str to str, optional
+            Units by name, as :meth:`plot` takes them (``kronlag.app.workflows.model_units(model_file)``
+            gives a model file's); they become the variables' ``units`` attributes.
+        """
+        arrays = LabelledArrays(self.t, units)
+        system = self.model.equations.system
+        r = self.lam.shape[1]
+        arrays.coordinates(self.coordinate_names, self.q, self.qd, self.qdd)
+        arrays.multipliers(system, self.lam, self.mu)
+        energy = arrays.units.get("energy")
+        arrays.variable("kinetic_energy", ("time",), self.kinetic_energy, energy)
+        arrays.variable("potential_energy", ("time",), self.potential_energy, energy)
+        arrays.variable("position_residual", ("time", "constraint"), self.position_residual)
+        arrays.variable("velocity_residual", ("time", "constraint"), self.velocity_residual[:, :r])
+        arrays.variable("nonholonomic_residual", ("time", "nonholonomic"), self.velocity_residual[:, r:])
+        arrays.reactions(self.model, self.t, self.q, self.lam)
+        return arrays.dataset({**self._metadata(), "result": self.result.name, "system": system.name})
 
     def _metadata(self) -> dict[str, Any]:
         return {"method": self.method, "status": self.status, "message": self.message, "nfev": self.nfev,

@@ -25,7 +25,7 @@ along its target), or those of actuated coordinates that replace the drives
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -34,11 +34,22 @@ import numpy as np
 from ..core.errors import AssemblyError, InputError, ModelError
 from ..core.limits import MAX_OUTPUT_POINTS
 from ..numeric.linalg import least_norm
-from ..numeric.reactions import Reaction, column_unit, joint_reaction, multiplier_labels, reaction_columns
+from ..numeric.reactions import (
+    GENERALIZED_FORCE_UNITS,
+    Reaction,
+    column_unit,
+    joint_reaction,
+    multiplier_labels,
+    multiplier_units,
+    reaction_columns,
+)
 from ..numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
+from ..simulation.labelled import LabelledArrays, multiplier_columns
 from ..simulation.trajectory import ColumnExport
 
 if TYPE_CHECKING:
+    import xarray
+
     from ..numeric.numeric_model import NumericModel
 
 __all__ = ["Kinematics", "InverseDynamicsRun", "kinematic_analysis", "inverse_dynamics", "BRANCH_RATIO"]
@@ -91,6 +102,26 @@ class Kinematics(ColumnExport):
     def _metadata(self) -> dict[str, Any]:
         return {"message": self.message}
 
+    def to_xarray(self, *, units: Mapping[str, str] | None = None) -> xarray.Dataset:
+        """The analysis as an :class:`xarray.Dataset` (needs xarray): ``q``, ``qd``, ``qdd`` over
+        ``time`` and ``coordinate``, the points' ``point_position``, ``point_velocity`` and
+        ``point_acceleration``
+        over ``time``, ``point`` and ``axis``; ``message`` and ``success`` as attributes.  ``units``
+        as :meth:`kronlag.Trajectory.to_xarray` takes them."""
+        return self._arrays(units).dataset({"message": self.message, "success": int(self.success)})
+
+    def _arrays(self, units: Mapping[str, str] | None) -> LabelledArrays:
+        arrays = LabelledArrays(self.t, units)
+        arrays.coordinates(self.coordinate_names, self.q, self.qd, self.qdd)
+        if self.points:
+            states = list(self.points.values())
+            arrays.dimension("point", list(self.points))
+            arrays.dimension("axis", list("xyz"[:states[0]["position"].shape[1]]))
+            for quantity in ("position", "velocity", "acceleration"):
+                arrays.variable(f"point_{quantity}", ("time", "point", "axis"),
+                                np.stack([state[quantity] for state in states], axis=1))
+        return arrays
+
     def _reported(self) -> dict[str, np.ndarray]:
         """The columns of :meth:`report`: time and coordinates."""
         return {k: v for k, v in self.columns().items() if k == "t" or k in self.coordinate_names}
@@ -101,8 +132,7 @@ class Kinematics(ColumnExport):
     def report(self, *, rows: int = 11) -> str:
         """A table of the main columns at up to ``rows`` evenly spaced times, and the message."""
         columns = self._reported()
-        picks = (np.unique(np.linspace(0, len(self.t) - 1, min(rows, len(self.t))).round().astype(int))
-                 if len(self.t) else [])
+        picks = np.unique(np.linspace(0, len(self.t) - 1, min(rows, len(self.t))).round().astype(int))
         widths = [max(12, len(name)) for name in columns]
         lines = ["  ".join(f"{name:>{width}}" for name, width in zip(columns, widths))]
         lines += ["  ".join(f"{values[i]:{width}.5g}" for values, width in zip(columns.values(), widths))
@@ -146,14 +176,35 @@ class InverseDynamicsRun(Kinematics):
         return joint_reaction(self.model, name, self.t, self.q, self.lam, frame=frame)
 
     def columns(self) -> dict[str, np.ndarray]:
-        """The :class:`Kinematics` columns, then ``force_<actuated>``, ``lambda<j>``, ``mu<k>`` and the
-        joints' reactions."""
+        """The :class:`Kinematics` columns, then ``force_<actuated>``, the multipliers by constraint name
+        (``lambda[<constraint>]``, ``mu[<constraint>]``; ``lambda<j>``, ``mu<k>`` for a run without its
+        model) and the joints' reactions."""
+        multipliers = (multiplier_columns(self.model.equations.system) if self.model is not None else
+                       [f"lambda{j + 1}" for j in range(self.lam.shape[1])]
+                       + [f"mu{k + 1}" for k in range(self.mu.shape[1])])
         blocks = [([f"force_{n}" for n in self.actuated], self.forces),
-                  ([f"lambda{j + 1}" for j in range(self.lam.shape[1])], self.lam),
-                  ([f"mu{k + 1}" for k in range(self.mu.shape[1])], self.mu)]
+                  (multipliers, np.hstack([self.lam, self.mu]))]
         columns = super().columns()
         columns.update({label: values[:, i] for labels, values in blocks for i, label in enumerate(labels)})
         return columns | self.reactions
+
+    def to_xarray(self, *, units: Mapping[str, str] | None = None) -> xarray.Dataset:
+        """The run as an :class:`xarray.Dataset` (needs xarray): the :class:`Kinematics` variables, the
+        driving forces ``force`` over ``time`` and ``actuated`` (the actuated coordinates or the drives'
+        names; ``N*m`` on an angle, ``N`` on a length, when the units tell), ``lambda`` and ``mu`` by
+        constraint, and the joints' ``reaction_force`` and ``reaction_couple`` as
+        :meth:`kronlag.Trajectory.to_xarray` has them.  ``units`` as that method takes them."""
+        arrays = self._arrays(units)
+        system = self.model.equations.system if self.model is not None else None
+        force_units = multiplier_units(system, arrays.units) if system is not None and arrays.si else {}
+        force_units |= {name: unit for name in self.actuated
+                        if (unit := GENERALIZED_FORCE_UNITS.get(arrays.units.get(name, ""))) and arrays.si}
+        arrays.dimension("actuated", list(self.actuated))
+        arrays.variable("force", ("time", "actuated"), self.forces, [force_units.get(name) for name in self.actuated])
+        arrays.multipliers(system, self.lam, self.mu)
+        if self.model is not None:
+            arrays.reactions(self.model, self.t, self.q, self.lam)
+        return arrays.dataset({"message": self.message, "success": int(self.success)})
 
     def _reported(self) -> dict[str, np.ndarray]:
         """The columns of :meth:`report`: the forces, the multipliers of the constraints that are
@@ -226,6 +277,7 @@ def _advance(model: NumericModel, state: tuple, time: float, tol: float, *, dept
     start, previous, speed, acceleration = state
     h = time - start
     predictor = previous + h * speed + h * h / 2 * acceleration
+    failure: AssemblyError | None = None
     try:
         q, qd = model.assemble(predictor, t=time, tol=tol)  # qd unique: solved afresh, no cancellation
         correction = np.max(np.abs(q - predictor))
@@ -233,8 +285,6 @@ def _advance(model: NumericModel, state: tuple, time: float, tol: float, *, dept
         close = correction <= BRANCH_RATIO * displacement + 1e3 * tol * (1 + np.max(np.abs(q)))
     except AssemblyError as error:
         close, failure = False, error
-    else:
-        failure = None
     if close:
         return time, q, qd, _accelerations(model, q, qd, time)
     if depth == _MAX_HALVINGS:
@@ -392,7 +442,7 @@ def inverse_dynamics(model: NumericModel, t, q_guess, *, actuated: Sequence[str]
     names = [item.name for item in system.constraints]
     drive_rows = [names.index(name) for name in system.drives]
     if actuated is None:
-        labels, constraints, columns = tuple(system.drives), None, ()
+        labels, constraints, columns = tuple(system.drives), None, tuple[str, ...]()
     else:
         labels, columns = tuple(str(name) for name in actuated), tuple(actuated)
         constraints = _mechanism_rows(model)

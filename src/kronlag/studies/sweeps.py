@@ -29,10 +29,12 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..numeric.numeric_model import NumericModel
+from ..simulation.labelled import LabelledArrays, rate_unit
 from ..simulation.simulate import simulate
 
 if TYPE_CHECKING:
     import pandas
+    import xarray
 
     from ..simulation.trajectory import Trajectory
 
@@ -63,6 +65,18 @@ DEFAULT_OUTCOMES: dict[str, Callable] = {
     "energy_drift": _energy_drift,
     "max_position_residual": _max_position_residual,
 }
+
+
+def _column_units(units: Mapping[str, str], coordinate_names: Sequence[str]) -> dict[str, str]:
+    """The units of the table's columns that ``units`` (by name) determine: the swept parameters and
+    coordinates, the speeds, the default outcomes and ``wall_time``."""
+    known = {name: unit for name, unit in units.items() if name not in ("t", "energy")}
+    known |= {f"{name}d": rate for name in coordinate_names if (rate := rate_unit(units.get(name), units))}
+    known |= {f"{name}_final": units[name] for name in coordinate_names if name in units}
+    if "energy" in units:
+        known["energy_drift"] = units["energy"]
+    return known | {"wall_time": "s"}
+
 
 _STATUS_OK, _STATUS_FAILED, _STATUS_ERROR, _STATUS_LOST = "ok", "failed", "error", "lost"
 
@@ -116,14 +130,17 @@ class SweepResult:
                         if keep_trajectories else None)
         return cls(table, trajectories)
 
-    def to_xarray(self):
+    def to_xarray(self, *, units: Mapping[str, str] | None = None) -> xarray.Dataset:
         """The kept trajectories as an :class:`xarray.Dataset` with dimensions ``case``, ``time``,
         ``coordinate`` (variables ``q``, ``qd``; the cases' scalar columns as coordinates of
-        ``case``).  Needs xarray and ``keep_trajectories=True`` with a common ``t_eval``."""
-        try:
-            import xarray as xr
-        except ImportError as error:
-            raise ImportError("SweepResult.to_xarray needs xarray: pip install xarray") from error
+        ``case``).  Needs xarray and ``keep_trajectories=True`` with a common ``t_eval``.
+
+        ``units`` (by name: the parameters', and the coordinates', ``"t"`` and ``"energy"`` as
+        :meth:`kronlag.Trajectory.to_xarray` takes them) become the ``units`` attributes of ``q``,
+        ``qd``, the swept parameters, coordinates and speeds, and the default outcomes
+        (:data:`DEFAULT_OUTCOMES`: ``<q>_final`` in the unit of ``q``, ``energy_drift`` in the
+        energy's); ``wall_time`` is in ``s``.
+        """
         if not self.trajectories:
             raise InputError("no trajectories kept: run the sweep with keep_trajectories=True")
         cases = sorted(self.trajectories)
@@ -131,12 +148,17 @@ class SweepResult:
         if any(len(self.trajectories[case].t) != len(first.t) or not np.allclose(self.trajectories[case].t, first.t)
                for case in cases):
             raise InputError("the trajectories have different output times: give t_eval to the sweep")
+        arrays = LabelledArrays(first.t, units)
         rows = self.table.set_index("case").loc[cases]
-        return xr.Dataset(
-            {"q": (("case", "time", "coordinate"), np.stack([self.trajectories[c].q for c in cases])),
-             "qd": (("case", "time", "coordinate"), np.stack([self.trajectories[c].qd for c in cases]))},
-            coords={"case": cases, "time": first.t, "coordinate": list(first.coordinate_names),
-                    **{column: ("case", rows[column].to_numpy()) for column in rows.columns}})
+        column_units = _column_units(arrays.units, first.coordinate_names)
+        arrays.dimension("case", cases)
+        arrays.coords |= {column: ("case", rows[column].to_numpy(),
+                                   {"units": column_units[column]} if column in column_units else {})
+                          for column in rows.columns}
+        arrays.coordinates(first.coordinate_names, np.stack([self.trajectories[c].q for c in cases]),
+                           np.stack([self.trajectories[c].qd for c in cases]), None,
+                           dims=("case", "time", "coordinate"))
+        return arrays.dataset({})
 
 
 class SweepInterrupted(KeyboardInterrupt):
