@@ -131,7 +131,8 @@ class _LimitRun:
         while True:
             variant = contact_model(self.model, self.active)
             watch = LimitWatch(self.kernels, np.array([i not in self.active for i in range(n)]),
-                               tuple(range(self.model.r, variant.r)), self.first_step)
+                               tuple(range(self.model.r, variant.r)), self.first_step,
+                               None if variant.time_varying else variant.parameter_vector(t))
             self.first_step = 0.0
             t_eval = problem.t_eval
             if t_eval is not None and t > problem.t0:

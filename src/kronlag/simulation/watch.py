@@ -37,12 +37,15 @@ class LimitWatch:
     first_step : float
         After a rebound, a first step short enough to end inside the flight (0: the integrator's
         choice): a crossing is seen only from a step that ends with the gap open.
+    parameters : (P,) or None
+        The model's parameter vector when it is constant (None: asked of the model at each ``t``).
     """
 
     kernels: LimitKernels
     watched: np.ndarray
     contact_rows: tuple[int, ...]
     first_step: float = 0.0
+    parameters: np.ndarray | None = None
 
     @property
     def size(self) -> int:
@@ -51,7 +54,7 @@ class LimitWatch:
     def values(self, model, t: float, y: np.ndarray) -> np.ndarray:
         """The watched functions at ``(t, y)``; 1 for a side held as a constraint, shape (:attr:`size`,)."""
         m = model.m
-        p = model.parameter_vector(t)
+        p = self.parameters if self.parameters is not None else model.parameter_vector(t)
         gaps = np.where(self.watched, self.kernels.gap(y[:m], p), 1.0)
         if not self.contact_rows:
             return gaps
