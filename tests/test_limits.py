@@ -5,6 +5,7 @@ forms (bouncing ball, pendulum striking a stop, a lifted ball, a four-bar crank 
 from __future__ import annotations
 
 import functools
+import re
 
 import numpy as np
 import pytest
@@ -251,6 +252,25 @@ def test_pendulum_from_a_model_file(tmp_path):
     assert impact.speed_after == pytest.approx(0.6 * np.sqrt(3 * G / 0.8), rel=1e-8)
 
 
+def test_four_bar_with_a_stop_from_a_model_file(tmp_path):
+    from kronlag.app.workflows import initial_state, numeric_model
+    from kronlag.model.builtin import example_path
+
+    path = tmp_path / "four_bar_stop.toml"
+    text = example_path("four_bar").read_text().replace('tau = {value = 0.0', 'tau = {value = 3.0')
+    path.write_text(text + '\n[[limits]]\nname = "crank stop"\nexpression = "q1"\nupper = 2.0\nrestitution = 0.7\n')
+    model_file = kronlag.load_model(path, apply_drives=False)
+    model = numeric_model(model_file)
+    q0, qd0 = initial_state(model_file, model)
+    trajectory = kronlag.simulate(model, (0, 1.0), q0, qd0)
+    impacts = _impacts(trajectory, "crank stop upper")
+    assert impacts and trajectory.success
+    for impact in impacts:
+        assert impact.speed_after == pytest.approx(-0.7 * impact.speed_before, rel=1e-12)
+        after = np.flatnonzero(trajectory.t == impact.t)[-1]
+        assert np.max(np.abs(model.Phi_q(trajectory.q[after]) @ trajectory.qd[after])) < 1e-9
+
+
 @pytest.mark.parametrize(("change", "message"), [
     (('lower = "floor"', 'lower = "g"'), "limits[0].lower"),
     (('restitution = "e"', 'restitution = "m"'), "limits[0].restitution"),
@@ -297,3 +317,15 @@ def test_plot_marks_the_impacts():
     assert labels == ["impact: floor lower"] * len(_impacts(trajectory))
     assert figure.axes[-1].get_title() == "limit contact forces" or any(
         axes.get_title() == "limit contact forces" for axes in figure.axes)
+
+
+def test_cli_simulates_a_model_file_with_limits(tmp_path, capsys):
+    from kronlag.app.cli import main
+
+    path = tmp_path / "ball.toml"
+    path.write_text(BALL_FILE + '\n[initial]\nq = {y = 1}\n\n[simulation]\nt_end = 1.5\n')
+    code = main(["simulate", str(path), "--plot", str(tmp_path / "ball.png")])
+    out = capsys.readouterr().out
+    assert code == 0 and "status: ok" in out
+    assert re.search(r"limit events: \d+ impact, 1 contact, 0 release", out)
+    assert (tmp_path / "ball.png").stat().st_size > 10_000

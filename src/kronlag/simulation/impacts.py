@@ -38,7 +38,7 @@ from ..numeric.numeric_model import NumericModel
 from ..numeric.projection import project_positions
 from ..numeric.tolerances import CONTACT_GAP, RESTING_GAP
 from ..symbolic.derivation import derive
-from .problem import MultibodyProblem, Solution, Solver
+from .problem import MultibodyProblem, Solution, Solver, derived_shapes
 from .trajectory import LimitEvent, Result
 from .watch import LimitWatch
 
@@ -260,8 +260,14 @@ class _LimitRun:
                      limit_forces=forces, t=solution.t, y=solution.y)
         self.pieces.append(piece)
 
+    def _empty(self) -> dict[str, np.ndarray]:
+        """The outputs of a run that ended before its first output."""
+        m, r, s = self.model.shape
+        return {**{name: np.empty(shape) for name, shape in derived_shapes(0, m, r, s).items()},
+                "limit_forces": np.empty((0, len(self.kernels))), "t": np.empty(0), "y": np.empty((0, 2 * m))}
+
     def _solution(self, result: Result, message: str, steps: int, nfev: int, njev: int) -> Solution:
-        pieces = self.pieces
+        pieces = self.pieces or [self._empty()]
         joined = {key: np.concatenate([piece[key] for piece in pieces]) for key in pieces[0]}
         t, y = joined.pop("t"), joined.pop("y")
         events = tuple(sorted(self.events, key=lambda event: event.t))
