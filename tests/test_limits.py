@@ -123,6 +123,7 @@ def test_contact_released_when_its_force_changes_sign():
         trajectory = kronlag.simulate(model, (0, 3), [0.0], [0.0], method=method, t_eval=[1.0, 3.0])
         kinds = [(event.kind, event.side) for event in trajectory.events]
         assert kinds == [("contact", "floor lower"), ("release", "floor lower")], method
+        assert trajectory.events[0].reason == "on the stop and pressed against it"
         assert trajectory.events[1].t == pytest.approx(release, rel=1e-8)
         assert trajectory.limit_forces[0, 0] == pytest.approx(2.0 * G - 10.0, rel=1e-9)
         assert trajectory.q[1, 0] == pytest.approx(10.0 * (3.0 - release) ** 3 / 12.0, rel=1e-8)

@@ -205,16 +205,18 @@ class _LimitRun:
                                               impulse=impulses.get(i, 0.0), speed_before=float(speed),
                                               speed_after=float(J[i] @ qd_after)))
         if resting:
+            held = tuple(sorted(set(self.active) | set(resting)))
+            lam = contact_model(self.model, held).forward_dynamics(q, qd_after, t).lam
+            forces = {i: float(-lam[self.model.r + k]) for k, i in enumerate(held)}
+            resting = [i for i in resting if forces[i] > 0]  # a contact that would pull is not held
             self.active = tuple(sorted(set(self.active) | set(resting)))
-            held = contact_model(self.model, self.active)
-            lam = held.forward_dynamics(q, qd_after, t).lam
-            for k, i in enumerate(self.active):
-                if i in resting:
-                    threshold = np.sqrt(2 * -acceleration[i] * rest_height)
-                    self.events.append(LimitEvent(
-                        t=t, side=self.kernels.names[i], kind="contact", q=q.copy(), force=float(-lam[self.model.r + k]),
-                        reason=f"rebound speed {abs(e[i] * before[impacting.index(i)]):.3g} <= {threshold:.3g} "
-                               f"(rebound height <= {RESTING_GAP:g} atol)"))
+            for i in resting:
+                speed = float(before[impacting.index(i)])
+                threshold = np.sqrt(2 * -acceleration[i] * rest_height)
+                reason = (f"rebound speed {-e[i] * speed:.3g} <= {threshold:.3g}, a rebound height <= "
+                          f"{RESTING_GAP:g} atol" if speed < 0 else "on the stop and pressed against it")
+                self.events.append(LimitEvent(t=t, side=self.kernels.names[i], kind="contact", q=q.copy(),
+                                              force=forces[i], reason=reason))
         return self._project(t, np.concatenate([q, qd_after]))
 
     def _impulse(self, t: float, q: np.ndarray, qd: np.ndarray, sides: list[int], J: np.ndarray,
