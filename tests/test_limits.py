@@ -170,6 +170,34 @@ def test_four_bar_crank_hitting_a_stop_keeps_the_loop_closed():
         assert trajectory.q[after, 0] == pytest.approx(2.0, abs=1e-10)
 
 
+@functools.cache
+def four_bar_with_stop() -> kronlag.NumericModel:
+    system = kronlag.models.four_bar()
+    system.add_limit(sp.Symbol("q1"), upper=2.0, restitution=0.7, name="crank stop")
+    values = {"l1": 0.2, "l2": 0.6, "l3": 0.5, "l4": 0.5, "m1": 1.0, "m2": 2.0, "m3": 3.0, "I1": 1 / 300,
+              "I2": 0.06, "I3": 0.0625, "g": G, "tau": 3.0}
+    return kronlag.derive(system).numeric(values)
+
+
+@pytest.mark.parametrize("method", ["switching", "projection", "baumgarte", "ali3p"])
+def test_four_bar_crank_comes_to_rest_on_its_stop(method):
+    """Driven against the stop by its torque, the crank's impacts accumulate, the Zeno rule holds it
+    there, and its contact force is the static one: h(q) = Phi_q^T lam + J^T lam_c at qd = 0,
+    F = -lam_c (from the model's own terms, independently of the contact model)."""
+    model = four_bar_with_stop()
+    q0, qd0 = model.assemble([1.0, 0.5, 1.5], fixed={"q1": 1.0})
+    trajectory = kronlag.simulate(model, (0, 2.0), q0, qd0, method=method)
+    assert trajectory.success, trajectory.message
+    contacts = [event for event in trajectory.events if event.kind == "contact"]
+    assert len(contacts) == 1 and contacts[0].t < 1.4
+    q = trajectory.q[-1]
+    assert q[0] == pytest.approx(2.0, abs=1e-9) and np.max(np.abs(trajectory.qd[-1])) < 1e-8
+    terms = model.dynamics_terms(q, np.zeros(3))
+    rows = np.vstack([terms["Phi_q"], [[-1.0, 0.0, 0.0]]])  # the gap 2 - q1
+    multipliers = np.linalg.lstsq(rows.T, terms["h"], rcond=None)[0]
+    assert trajectory.limit_forces[-1, 0] == pytest.approx(-multipliers[-1], rel=1e-8)
+
+
 # -- model files ------------------------------------------------------------------------------------
 
 BALL_FILE = """

@@ -117,7 +117,10 @@ def march(make_stepper: Callable[[], Stepper], problem: MultibodyProblem, option
                 result, message = Result.MAX_STEPS, (f"Integration stopped at t = {stepper.t:.6g}: "
                                                      f"{Result.MAX_STEPS.value} ({options.max_steps})")
                 break
-            stepper.limit_step(min(options.max_step, watch.max_step()))
+            largest = min(options.max_step, watch.max_step())
+            if limits is not None and limits.first_step > 0 and steps == 0:  # a rebound: end inside its flight
+                largest = min(largest, limits.first_step)
+            stepper.limit_step(largest)
             failure = stepper.step()
             if failure is not None:
                 result, message = Result.SOLVER_FAILED, f"Integration failed at t = {stepper.t:.6g}: {failure}"
