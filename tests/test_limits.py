@@ -358,3 +358,6 @@ def test_cli_simulates_a_model_file_with_limits(tmp_path, capsys):
     assert code == 0 and "status: ok" in out
     assert re.search(r"limit events: \d+ impact, 1 contact, 0 release", out)
     assert (tmp_path / "ball.png").stat().st_size > 10_000
+    code = main(["simulate", str(path), "--output", str(tmp_path / "ball.csv")])
+    header = (tmp_path / "ball.csv").read_text().splitlines()[0].split(",")
+    assert code == 0 and header[-1] == "floor lower.force"

@@ -240,7 +240,8 @@ class Trajectory(ColumnExport):
     position_residualr``; ``velocity_residual1 .. velocity_residual(r+s)``; then, for
     every joint of the system (:meth:`kronlag.System.add_joint`), its reaction in world
     components (:meth:`reaction`): ``<joint>.Fx, <joint>.Fy[, <joint>.Fz]`` and
-    ``<joint>.Mz`` (planar) or ``<joint>.Mx, .My, .Mz`` (spatial).
+    ``<joint>.Mz`` (planar) or ``<joint>.Mx, .My, .Mz`` (spatial); for a model with limits, the contact
+    force of every limit side (:attr:`limit_forces`): ``<limit> lower.force``, ``<limit> upper.force``.
     """
 
     t: np.ndarray
@@ -322,6 +323,9 @@ class Trajectory(ColumnExport):
         ]
         columns = {name: values[:, i] for labels, values in blocks for i, name in enumerate(labels)}
         columns.update(reaction_columns(self.model, self.t, self.q, self.lam))
+        if self.limit_forces is not None:  # limits: each side's contact force
+            sides = [side.name for limit in self.model.equations.system.limits for side in limit.sides]
+            columns.update({f"{side}.force": self.limit_forces[:, i] for i, side in enumerate(sides)})
         return columns
 
     def reaction(self, name: str, *, frame: str = "world") -> Reaction:
