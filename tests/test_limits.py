@@ -198,6 +198,22 @@ def test_four_bar_crank_comes_to_rest_on_its_stop(method):
     assert trajectory.limit_forces[-1, 0] == pytest.approx(-multipliers[-1], rel=1e-8)
 
 
+def test_sleigh_hitting_a_wall_keeps_its_blade_constraint():
+    """A nonholonomic case: the Chaplygin sleigh runs into the wall x <= 1; the impulse keeps the blade's
+    A qd + b = 0 and reverses the wall-normal speed by e."""
+    system = kronlag.models.chaplygin_sleigh()
+    system.add_limit(sp.Symbol("x"), upper=1.0, restitution=0.5, name="wall")
+    model = kronlag.derive(system).numeric({"m": 1.0, "I": 0.1, "a": 0.2})
+    for method in ("auto", "projection"):
+        trajectory = kronlag.simulate(model, (0, 2), [0.0, 0.0, 0.3], [np.cos(0.3), np.sin(0.3), 0.0], method=method)
+        (impact,) = _impacts(trajectory, "wall upper")
+        before, after = np.flatnonzero(trajectory.t == impact.t)[[0, -1]]
+        q, qd = trajectory.q[after], trajectory.qd[after]
+        assert abs(model.A(q) @ qd + model.b(q).ravel()) < 1e-12
+        assert qd[0] == pytest.approx(-0.5 * trajectory.qd[before, 0], rel=1e-12)
+        assert np.max(trajectory.q[:, 0]) <= 1.0 + 1e-12
+
+
 # -- model files ------------------------------------------------------------------------------------
 
 BALL_FILE = """

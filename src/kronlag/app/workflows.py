@@ -25,6 +25,7 @@ from ..model.symbols import t
 from ..model.system import drive_name
 from ..numeric.tolerances import matrix_rank
 from ..simulation.simulate import simulate
+from ..simulation.trajectory import LimitEvent
 from ..studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
 from ..symbolic.derivation import derive
 from ..symbolic.equations import Equations
@@ -345,7 +346,7 @@ def _limit_events(trajectory: Trajectory) -> tuple[tuple[str, int], ...]:
     """The number of limit events by kind, for a model with limits (else empty)."""
     if trajectory.limit_forces is None:
         return ()
-    kinds = [getattr(event, "kind", None) for event in trajectory.events]
+    kinds = [event.kind for event in trajectory.events if isinstance(event, LimitEvent)]
     return tuple((kind, kinds.count(kind)) for kind in ("impact", "contact", "release"))
 
 

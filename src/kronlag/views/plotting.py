@@ -24,6 +24,7 @@ from sympy.printing.conventions import split_super_sub
 
 from ..core.errors import InputError
 from ..numeric.reactions import GENERALIZED_FORCE_UNITS, REACTION_UNITS, multiplier_labels
+from ..simulation.trajectory import LimitEvent
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -271,7 +272,7 @@ _MAX_EVENT_LABELS = 12
 def _mark_limit_events(panels: list[Axes], traj: Trajectory) -> None:
     """A vertical line at every limit event in every panel (impacts dashed, contacts and releases
     dotted), the first impacts labelled with the side's name in the first panel."""
-    events = [event for event in traj.events if getattr(event, "side", None)]
+    events = [event for event in traj.events if isinstance(event, LimitEvent)]
     for k, event in enumerate(events):
         style = "--" if event.kind == "impact" else ":"
         for axes in panels:
