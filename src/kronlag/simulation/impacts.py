@@ -92,8 +92,9 @@ def check_start(model: NumericModel, q0: np.ndarray, t0: float, atol: float) -> 
         if gap < -CONTACT_GAP * atol:
             lower = side.name.endswith("lower")
             value = bound + gap if lower else bound - gap
-            raise InputError(f"limit {side.limit!r}: its value {value:.9g} is {'below the lower' if lower else 'above the upper'}"
-                             f" bound {bound:.9g} at the initial state")
+            where = "below the lower" if lower else "above the upper"
+            raise InputError(f"limit {side.limit!r}: its value {value:.9g} is {where} bound {bound:.9g} at the "
+                             "initial state")
 
 
 def solve_with_limits(solver: Solver, problem: MultibodyProblem,

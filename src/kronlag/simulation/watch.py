@@ -20,7 +20,7 @@ from scipy.optimize import brentq
 from ..core.errors import SingularConfigurationError
 from ..numeric.limit_kernels import LimitKernels
 
-__all__ = ["LimitWatch", "LimitStop", "locate"]
+__all__ = ["LimitStop", "LimitWatch", "locate"]
 
 
 @dataclass(frozen=True, eq=False)
