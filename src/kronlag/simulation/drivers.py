@@ -191,9 +191,10 @@ def output_rows(problem: MultibodyProblem, t0: float, options: SolverOptions) ->
 
 def _buffers(model: NumericModel, rows: int, watched: int) -> dict[str, np.ndarray]:
     """The output buffers of :class:`~.interface.DriverOptions` by field name: ``t_out`` (rows,),
-    ``y_out`` (rows, 2 m), the derived quantities of :class:`Solution` (rows, ...), ``events`` and
-    ``y_end`` and the limits' ``roots`` (``watched`` functions); C-contiguous parts of one block (one allocation: with outputs at every step, ``rows``
-    is large and the driver touches only the rows it writes)."""
+    ``y_out`` (rows, 2 m), the derived quantities of :class:`Solution` (rows, ...), ``events``,
+    ``y_end`` and the limits' ``roots`` (``watched`` functions); C-contiguous parts of one block (one
+    allocation: with outputs at every step, ``rows`` is large and the driver touches only the rows it
+    writes)."""
     m, r, s = model.m, model.r, model.s
     shapes = {"t_out": (rows,), "y_out": (rows, 2 * m), **derived_shapes(rows, m, r, s),
               "events": (_MAX_EVENTS, 5 + m), "y_end": (2 * m,), "roots": (max(watched, 1),)}
