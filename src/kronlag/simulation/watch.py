@@ -84,7 +84,12 @@ def locate(values: Callable[[float], np.ndarray], t0: float, t1: float, before: 
     if falling.size == 0:
         return None
     tolerance = 4 * np.finfo(float).eps * max(abs(t0), abs(t1), 1.0)
-    roots = {int(i): brentq(lambda t, i=i: values(t)[i], t0, t1, xtol=tolerance) if values(t1)[i] < 0 else t1
-             for i in falling}
+    start, end = values(t0), values(t1)  # the dense output's ends (the step's, up to rounding)
+    roots = {}
+    for i in (int(i) for i in falling):
+        if start[i] <= 0 or end[i] >= 0:  # no sign change left on the interpolant: at an end
+            roots[i] = t0 if start[i] <= 0 else t1
+        else:
+            roots[i] = brentq(lambda t, i=i: values(t)[i], t0, t1, xtol=tolerance)
     first = min(roots.values())
     return first, tuple(i for i, root in roots.items() if root <= first + 2 * tolerance)
