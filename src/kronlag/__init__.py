@@ -50,7 +50,7 @@ from .numeric.reactions import Reaction  # noqa: E402
 from .numeric.results import ForwardDynamicsBatch, ForwardDynamicsResult, InverseDynamicsResult  # noqa: E402
 from .simulation.problem import Solver  # noqa: E402
 from .simulation.simulate import simulate  # noqa: E402
-from .simulation.trajectory import Result, SingularPassage, Trajectory  # noqa: E402
+from .simulation.trajectory import LimitEvent, Result, SingularPassage, Trajectory  # noqa: E402
 from .studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis  # noqa: E402
 from .studies.equilibrium import Equilibrium  # noqa: E402
 from .studies.linearization import LinearModel  # noqa: E402
@@ -78,6 +78,7 @@ __all__ = [
     "Equations",
     "load_model",
     "System",
+    "LimitEvent",
     "PlanarBody",
     "RigidBody",
     "RotationSequence",

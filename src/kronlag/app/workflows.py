@@ -26,6 +26,7 @@ from ..model.symbols import t
 from ..model.system import drive_name
 from ..numeric.tolerances import matrix_rank
 from ..simulation.simulate import simulate
+from ..simulation.trajectory import LimitEvent
 from ..studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
 from ..symbolic.derivation import derive
 from ..symbolic.equations import Equations
@@ -286,6 +287,9 @@ class SimulationSummary:
     largest_reactions : tuple of (str, float)
         Every joint's name and its largest reaction force ``max |F|`` over the run
         (:meth:`Trajectory.reaction`).
+    limit_events : tuple of (str, int)
+        The number of limit events by kind (``"impact"``, ``"contact"``, ``"release"``), for a model
+        with limits.
     """
 
     success: bool
@@ -301,6 +305,7 @@ class SimulationSummary:
     wall_time: float
     work: float = 0.0
     largest_reactions: tuple[tuple[str, float], ...] = ()
+    limit_events: tuple[tuple[str, int], ...] = ()
 
     def report(self) -> str:
         """A few lines of text for people."""
@@ -312,6 +317,9 @@ class SimulationSummary:
             f"energy drift: {self.energy_drift:.3g} (relative {self.relative_energy_drift:.3g}; "
             f"E(t) - E(0) - W(t) with the work of non-conservative forces W = {self.work:.6g})",
         ]
+        if self.limit_events:  # impacts lose energy: the energy drift above includes it
+            lines.append("limit events: " + ", ".join(f"{count} {kind}" for kind, count in self.limit_events)
+                         + " (the energy drift includes what the impacts dissipate)")
         if self.largest_reactions:
             lines.append("max joint force |F|: " + ", ".join(f"{name} {force:.5g}"
                                                              for name, force in self.largest_reactions))
@@ -336,7 +344,16 @@ def summarize(trajectory: Trajectory) -> SimulationSummary:
         energy_drift=drift, relative_energy_drift=drift / scale if scale else 0.0, wall_time=trajectory.wall_time,
         work=float(work[-1]) if work.size else 0.0,
         largest_reactions=tuple((joint.name, _largest(np.linalg.norm(trajectory.reaction(joint.name).force, axis=1)))
-                                for joint in trajectory.model.equations.system.joints) if len(trajectory.t) else ())
+                                for joint in trajectory.model.equations.system.joints) if len(trajectory.t) else (),
+        limit_events=_limit_events(trajectory))
+
+
+def _limit_events(trajectory: Trajectory) -> tuple[tuple[str, int], ...]:
+    """The number of limit events by kind, for a model with limits (else empty)."""
+    if trajectory.limit_forces is None:
+        return ()
+    kinds = [event.kind for event in trajectory.events if isinstance(event, LimitEvent)]
+    return tuple((kind, kinds.count(kind)) for kind in ("impact", "contact", "release"))
 
 
 # -- inverse dynamics -----------------------------------------------------------------

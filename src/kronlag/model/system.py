@@ -29,6 +29,7 @@ from .bodies import Body
 from .frames import BodyPoint, make_body_point
 from .inputs import as_scalar, as_vector
 from .joints import Joint, add_joint
+from .limits import Limit, make_limit
 from .loads import (
     AppliedForce,
     BodyTorque,
@@ -100,6 +101,7 @@ class System:
         self.points: dict[str, BodyPoint] = {}
         self.joints: list[Joint] = []
         self.drives: list[str] = []  # names of the constraints added by add_drive
+        self.limits: list[Limit] = []
         if gravity is not None:
             vector = as_vector(gravity, "gravity", (2, 3))
             self._check_symbols(vector, "gravity", allow_q=False)
@@ -297,6 +299,26 @@ class System:
         self.add_constraint(target - motion, name=name)
         self.drives.append(name)
         return name
+
+    def add_limit(self, expression, *, lower=None, upper=None, restitution=0, name: str | None = None) -> Limit:
+        """Bound ``lower <= expression(q) <= upper`` (either bound may be absent): a stop.
+
+        At contact Newton's restitution law applies (post-impact gap speed ``-e`` times the
+        impact speed, every constraint kept); a contact that persists is held as a constraint
+        until its force would pull; see :mod:`kronlag.simulation.impacts` and docs/limits.md.
+        ``restitution`` and the bounds may use parameters; the initial state must lie within.
+        """
+        name = name or f"limit {len(self.limits) + 1}"
+        check_name(name, "limit")
+        self._unique(self.limits, name, "limit")
+        limit = make_limit(name, expression, lower, upper, restitution, self.coordinates)
+        self._check_symbols(limit.value, f"limit {name!r}")
+        for label, bound in (("lower bound", limit.lower), ("upper bound", limit.upper),
+                             ("restitution", limit.restitution)):
+            if bound is not None:
+                self._check_symbols(bound, f"limit {name!r} {label}", allow_q=False)
+        self.limits.append(limit)
+        return limit
 
     def add_nonholonomic_constraint(self, expression, *, name: str | None = None) -> None:
         """Add a constraint ``A_k(q) qd + b_k(q) = 0`` given as an expression linear in ``qd``."""

@@ -49,7 +49,8 @@ import numpy as np
 from ..core.errors import InputError
 
 __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
-           "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "ZERO_EIGENVALUE_RTOL", "integrator_tolerances",
+           "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "ZERO_EIGENVALUE_RTOL", "RESTING_GAP",
+           "CONTACT_GAP", "integrator_tolerances",
            "zero_eigenvalue_threshold", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes",
            "singular_ratio", "c_macros"]
 
@@ -82,6 +83,13 @@ INDEX3_TIGHTEST = (3e-13, 1e-11)
 #: An eigenvalue ``w^2`` of a linearization at most this fraction of the problem's scale is zero
 #: within rounding (see the module docstring); rounding leaves ~1e-15 of it, a true mode far more.
 ZERO_EIGENVALUE_RTOL = 1e-9
+#: Limits (:mod:`kronlag.simulation.impacts`): a contact becomes persistent (held as a constraint)
+#: when the rebound would lift its gap by at most ``RESTING_GAP * atol``, i.e. when the rebound speed
+#: ``v`` satisfies ``v^2 <= 2 |a| RESTING_GAP atol`` with ``a < 0`` the gap's acceleration in free
+#: motion: the Zeno rule, which ends an accumulation of impacts (a bouncing ball) after finitely many.
+RESTING_GAP = 10.0
+#: Limits: a gap at most ``CONTACT_GAP * atol`` (in its own units) at the start is in contact there.
+CONTACT_GAP = 10.0
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float,

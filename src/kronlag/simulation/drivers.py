@@ -23,10 +23,11 @@ from ..core.errors import CompilerError, InputError
 from ..numeric import codegen
 from ..numeric.numeric_model import NOT_FINITE
 from ..numeric.tolerances import numerical_rank
-from .interface import DriverOptions, c_declarations, doubles
+from .interface import DriverOptions, GapFunction, c_declarations, doubles
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
 from .stepping import SUCCESS, approach_text, stopped_text
 from .trajectory import Result, SingularPassage
+from .watch import LimitStop
 
 if TYPE_CHECKING:
     from ..numeric.numeric_model import NumericModel
@@ -122,7 +123,8 @@ def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
         if spec.sundials:
             _load_sundials()
         library = _driver_library(model.c_source + model.c_kernels(*spec.kernels) + c_declarations()
-                                  + _c_file("monitor.c") + _c_file("progress.c") + _c_file(spec.file))
+                                  + _c_file("monitor.c") + _c_file("progress.c") + _c_file("limits.c")
+                                  + _c_file(spec.file))
         function = getattr(library, spec.entry)
         function.argtypes, function.restype = [ctypes.POINTER(DriverOptions)], ctypes.c_int
         if spec.flag_names:
@@ -165,6 +167,8 @@ class Segment:
     njev: int
     #: Lowest and highest order used ((0, 0): a fixed-order driver).
     orders: tuple[int, int] = (0, 0)
+    #: Limits: the watched functions that fell through zero (``flag`` :attr:`Result.LIMIT`).
+    triggered: tuple[int, ...] = ()
 
     @property
     def hands_over(self) -> bool:
@@ -185,14 +189,15 @@ def output_rows(problem: MultibodyProblem, t0: float, options: SolverOptions) ->
     return times, len(times)
 
 
-def _buffers(model: NumericModel, rows: int) -> dict[str, np.ndarray]:
+def _buffers(model: NumericModel, rows: int, watched: int) -> dict[str, np.ndarray]:
     """The output buffers of :class:`~.interface.DriverOptions` by field name: ``t_out`` (rows,),
-    ``y_out`` (rows, 2 m), the derived quantities of :class:`Solution` (rows, ...), ``events`` and
-    ``y_end``; C-contiguous parts of one block (one allocation: with outputs at every step, ``rows``
-    is large and the driver touches only the rows it writes)."""
+    ``y_out`` (rows, 2 m), the derived quantities of :class:`Solution` (rows, ...), ``events``,
+    ``y_end`` and the limits' ``roots`` (``watched`` functions); C-contiguous parts of one block (one
+    allocation: with outputs at every step, ``rows`` is large and the driver touches only the rows it
+    writes)."""
     m, r, s = model.m, model.r, model.s
     shapes = {"t_out": (rows,), "y_out": (rows, 2 * m), **derived_shapes(rows, m, r, s),
-              "events": (_MAX_EVENTS, 5 + m), "y_end": (2 * m,)}
+              "events": (_MAX_EVENTS, 5 + m), "y_end": (2 * m,), "roots": (max(watched, 1),)}
     ends = list(accumulate((math.prod(shape) for shape in shapes.values()), initial=0))
     block = np.empty(ends[-1])
     return {name: block[start:end].reshape(shape) for (name, shape), start, end in zip(shapes.items(), ends, ends[1:])}
@@ -209,7 +214,8 @@ def run(kind: str, problem: MultibodyProblem, options: SolverOptions, t0: float,
     model = problem.model
     library = driver(model, kind)
     times, rows = output_rows(problem, t0, options)
-    buffers = _buffers(model, rows)
+    watch = problem.watch
+    buffers = _buffers(model, rows, watch.size if watch else 0)
     p = model.parameter_vector(t0)
     arrays = {"p": p, "y0": y0, "t_eval": times}
     arrays |= {name: value for name, value in inputs.items() if isinstance(value, np.ndarray)}
@@ -220,6 +226,13 @@ def run(kind: str, problem: MultibodyProblem, options: SolverOptions, t0: float,
               "max_order": options.max_order or 0, "n_eval": len(times), "max_rows": rows, "max_events": _MAX_EVENTS,
               "t_end": t0, "progress": progress, "progress_interval": progress_interval}
     fields |= {name: value for name, value in inputs.items() if name not in arrays}
+    if watch is not None:  # limits: the functions the driver watches (c/limits.c)
+        fields |= {"gaps": GapFunction(watch.kernels.c_address), "n_gaps": len(watch.kernels),
+                   "n_contacts": len(watch.contact_rows)}
+        if watch.first_step > 0 and "h0" not in inputs:
+            fields["h0"] = watch.first_step
+        arrays |= {"gap_parameters": p, "gap_watched": watch.watched.astype(float),
+                   "contact_rows": np.array(watch.contact_rows, dtype=float)}
     arguments = DriverOptions(**fields, **{name: doubles(array) for name, array in (arrays | buffers).items()})
     flag = getattr(library, DRIVERS[kind].entry)(ctypes.byref(arguments))
     n = arguments.n_out
@@ -227,7 +240,8 @@ def run(kind: str, problem: MultibodyProblem, options: SolverOptions, t0: float,
     passages = tuple(passage(model, record) for record in buffers["events"][:min(arguments.n_events, _MAX_EVENTS)])
     return Segment(t=outputs.pop("t_out"), y=outputs.pop("y_out"), derived=outputs, events=passages, flag=flag,
                    t_end=arguments.t_end, y_end=buffers["y_end"].copy(), steps=arguments.steps, nfev=arguments.nfev,
-                   njev=arguments.njev, orders=(arguments.lowest_order, arguments.highest_order))
+                   njev=arguments.njev, orders=(arguments.lowest_order, arguments.highest_order),
+                   triggered=tuple(np.flatnonzero(buffers["roots"][:watch.size]).tolist()) if watch else ())
 
 
 def segment_status(segment: Segment, model: NumericModel, kind: str) -> tuple[Result, str]:
@@ -258,7 +272,15 @@ def solution_of(segments: Sequence[Segment], result: Result, message: str) -> So
                     y=np.concatenate([segment.y for segment in segments]), result=result, message=message,
                     nfev=sum(segment.nfev for segment in segments), njev=sum(segment.njev for segment in segments),
                     steps=sum(segment.steps for segment in segments), derived=derived,
-                    events=tuple(event for segment in segments for event in segment.events))
+                    events=tuple(event for segment in segments for event in segment.events),
+                    stop=_limit_stop(segments[-1]))
+
+
+def _limit_stop(segment: Segment) -> LimitStop | None:
+    """Limits: where ``segment`` ended at an event, or None."""
+    if segment.flag != Result.LIMIT.code:
+        return None
+    return LimitStop(segment.t_end, segment.y_end.copy(), segment.triggered)
 
 
 def require(solver: Solver, model: NumericModel) -> None:

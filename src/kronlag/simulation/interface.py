@@ -17,7 +17,8 @@ import numpy as np
 
 from .trajectory import Result
 
-__all__ = ["FIELDS", "DriverOptions", "Progress", "HANDBACK", "c_declarations", "c_declaration", "doubles"]
+__all__ = ["FIELDS", "DriverOptions", "Progress", "GapFunction", "HANDBACK", "c_declarations", "c_declaration",
+           "doubles"]
 
 
 #: ``progress(t)`` after accepted steps (a NULL pointer: none): 0 to go on, or the
@@ -30,6 +31,9 @@ Progress = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_double)
 HANDBACK = 1
 
 _DOUBLES = ctypes.POINTER(ctypes.c_double)
+
+#: ``gaps(q, p, g)``: the gaps of the limit sides (:mod:`kronlag.numeric.limit_kernels`).
+GapFunction = ctypes.CFUNCTYPE(None, _DOUBLES, _DOUBLES, _DOUBLES)
 _D, _I, _L = ctypes.c_double, ctypes.c_int, ctypes.c_long
 
 #: The fields of :class:`DriverOptions`: name, ctypes type, ``"in"`` (set by Python; pointers are
@@ -79,6 +83,14 @@ FIELDS: tuple[tuple[str, type, str, str], ...] = (
     ("njev", _L, "out", "Jacobians"),
     ("lowest_order", _I, "out", "lowest order used by a variable-order driver (0: a fixed-order one)"),
     ("highest_order", _I, "out", "highest order used by a variable-order driver (0: a fixed-order one)"),
+    # limits (kronlag.simulation.impacts, c/limits.c): the watched functions, the segment ends at a root
+    ("gaps", GapFunction, "in", "the limit sides' gaps g(q, gap_parameters) (NULL: no limits)"),
+    ("gap_parameters", _DOUBLES, "in", "parameters of gaps"),
+    ("n_gaps", _I, "in", "number of limit sides"),
+    ("gap_watched", _DOUBLES, "in", "1: the side's gap is watched, 0: it is held as a constraint (n_gaps)"),
+    ("n_contacts", _I, "in", "contact constraints whose force -lam is watched"),
+    ("contact_rows", _DOUBLES, "in", "their rows of lam (n_contacts)"),
+    ("roots", _DOUBLES, "out", "1 for each watched function that fell through zero (n_gaps + n_contacts)"),
 )
 
 

@@ -21,6 +21,7 @@ from ..numeric.projection import project_positions, project_velocities
 from ..numeric.tolerances import integrator_tolerances
 from .control import RunControl
 from .trajectory import Result, SingularPassage
+from .watch import LimitStop, LimitWatch
 
 if TYPE_CHECKING:
     from ..numeric.numeric_model import NumericModel
@@ -52,6 +53,8 @@ class MultibodyProblem:
     t_eval: np.ndarray | None
     alpha: float
     beta: float
+    #: Limits: what this run watches (:mod:`.impacts` sets it; None: no limits).
+    watch: LimitWatch | None = None
 
     @property
     def m(self) -> int:
@@ -120,6 +123,8 @@ class Solution:
         (N, r + s) at the outputs, when the solver computed them (else :func:`simulate` does).
     events : tuple of SingularPassage
         Singular configurations passed.
+    stop : LimitStop or None
+        Limits: where a run with a ``problem.watch`` ended at an event (``result`` :attr:`Result.LIMIT`).
     """
 
     t: np.ndarray
@@ -131,6 +136,7 @@ class Solution:
     steps: int
     derived: dict[str, np.ndarray] | None = None
     events: tuple[SingularPassage, ...] = ()
+    stop: LimitStop | None = None
 
     #: The keys of :attr:`derived` (:func:`derived_shapes`).
     DERIVED: ClassVar[tuple[str, ...]] = tuple(derived_shapes(0, 0, 0, 0))

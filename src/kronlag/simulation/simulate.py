@@ -18,6 +18,7 @@ from ..core.errors import AssemblyError, InitialStateWarning, InputError, Singul
 from ..core.limits import MAX_OUTPUT_POINTS
 from ..numeric.linalg import velocity_constraints
 from .control import RunControl
+from .impacts import has_limits, solve_with_limits
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
 from .solvers import AUTO_PREFERENCE, METHODS
 from .trajectory import Trajectory
@@ -206,7 +207,10 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
             raise InputError(f"{label} is not finite for {', '.join(bad)}")
     problem = replace(start, **dict(zip(("q0", "qd0"), _consistent_start(start, options))))
     with control.catching_sigint():
-        solution = solver(options).solve(problem)
+        if has_limits(model):  # limits: segments between the impacts and contact changes
+            solution = solve_with_limits(solver(options), problem, _derived)
+        else:
+            solution = solver(options).solve(problem)
         if control.error is not None:
             error = control.error
             solution = replace(solution, message=f"{solution.message}: {type(error).__name__}: {error}")

@@ -12,6 +12,7 @@ from ..core.errors import NumericalError, SingularConfigurationError
 from ..numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
 from .problem import MultibodyProblem, Solution, SolverOptions
 from .trajectory import Result, SingularPassage
+from .watch import LimitStop, locate
 
 __all__ = ["Stepper", "ApproachWatch", "march", "approach_text", "stopped_text", "SUCCESS"]
 
@@ -103,33 +104,47 @@ def march(make_stepper: Callable[[], Stepper], problem: MultibodyProblem, option
     initial = 1 if every_step else pending  # outputs at t0 are the initial state
     times += [problem.t0] * initial
     states += [problem.y0] * initial
-    steps, result, message, events = 0, Result.SUCCESS, SUCCESS, ()
+    steps, result, message, events, stop = 0, Result.SUCCESS, SUCCESS, (), None
     stepper = None
+    limits = problem.watch
     try:
         watch = ApproachWatch(problem)
+        before = limits.values(problem.model, problem.t0, problem.y0) if limits else None
         stepper = make_stepper()
         while stepper.t < problem.t1:
+            t_before = stepper.t
             if steps >= options.max_steps:
                 result, message = Result.MAX_STEPS, (f"Integration stopped at t = {stepper.t:.6g}: "
                                                      f"{Result.MAX_STEPS.value} ({options.max_steps})")
                 break
-            stepper.limit_step(min(options.max_step, watch.max_step()))
+            largest = min(options.max_step, watch.max_step())
+            if limits is not None and limits.first_step > 0 and steps == 0:  # a rebound: end inside its flight
+                largest = min(largest, limits.first_step)
+            stepper.limit_step(largest)
             failure = stepper.step()
             if failure is not None:
                 result, message = Result.SOLVER_FAILED, f"Integration failed at t = {stepper.t:.6g}: {failure}"
                 break
             steps += 1
+            end, y_end = stepper.t, stepper.y
+            if limits is not None:  # a watched function through zero: the step ends there
+                stop, before = _limit_stop(limits, problem, stepper, t_before, before)
+                if stop is not None:
+                    end, y_end = stop.t, stop.y
             if every_step:
-                times.append(stepper.t)
-                states.append(stepper.y)
-            while pending < len(outputs) and outputs[pending] <= stepper.t:
+                times.append(end)
+                states.append(y_end)
+            while pending < len(outputs) and outputs[pending] <= end:
                 state = stepper.interpolate(outputs[pending])  # first: it may fail
                 times.append(outputs[pending])
                 states.append(state)
                 pending += 1
-            stop = options.control.report(options.progress, stepper.t)
             if stop is not None:
-                result, message = stop, stopped_text(stepper.t, stop)
+                result, message = Result.LIMIT, f"Stopped at t = {end:.6g}: {Result.LIMIT.value}"
+                break
+            stopped = options.control.report(options.progress, stepper.t)
+            if stopped is not None:
+                result, message = stopped, stopped_text(stepper.t, stopped)
                 break
             approach = watch.observe(stepper.t, stepper.y)
             if approach is not None:
@@ -145,4 +160,17 @@ def march(make_stepper: Callable[[], Stepper], problem: MultibodyProblem, option
         message = stopped_text(stepper.t if stepper is not None else problem.t0, result)
     nfev, njev = stepper.counters() if stepper is not None else (0, 0)
     return Solution(t=np.asarray(times, dtype=float), y=np.reshape(states, (len(states), 2 * problem.m)),
-                    result=result, message=message, nfev=nfev, njev=njev, steps=steps, events=events)
+                    result=result, message=message, nfev=nfev, njev=njev, steps=steps, events=events, stop=stop)
+
+
+def _limit_stop(limits, problem: MultibodyProblem, stepper: Stepper, t_before: float,
+                before: np.ndarray) -> tuple[LimitStop | None, np.ndarray]:
+    """Limits: the event inside the step just taken from ``t_before`` (the watched functions
+    ``before`` there), located on the stepper's dense output, and the functions at the step's end."""
+    model = problem.model
+    after = limits.values(model, stepper.t, stepper.y)
+    found = locate(lambda t: limits.values(model, t, stepper.interpolate(t)), t_before, stepper.t, before, after)
+    if found is None:
+        return None, after
+    t, triggered = found
+    return LimitStop(t, stepper.interpolate(t), triggered), after

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 
     from ..numeric.numeric_model import NumericModel
 
-__all__ = ["Trajectory", "SingularPassage", "Result"]
+__all__ = ["Trajectory", "SingularPassage", "LimitEvent", "Result"]
 
 
 class Result(enum.Enum):
@@ -63,6 +63,10 @@ class Result(enum.Enum):
     INTERRUPTED = -1007, "interrupted (Ctrl-C, SIGINT)"
     RAISED = -1008, "a callback (a time-varying parameter or progress) raised an exception"
     SOLVER_FAILED = -1000, "the integrator failed"
+    #: A segment that ends at a limit's event (a gap or a contact force through zero): the run goes
+    #: on after the impact or the change of contact (:mod:`kronlag.simulation.impacts`); never a
+    #: trajectory's result.
+    LIMIT = -1020, "a limit's gap or contact force reached zero"
 
     code: int
 
@@ -114,6 +118,53 @@ class SingularPassage:
     def __str__(self) -> str:
         return (f"singular configuration at t = {self.t:.6g} (sigma ratio {self.ratio:.2g}; constraints "
                 f"{', '.join(self.constraints)}), q = {np.array2string(self.q, precision=6)}")
+
+
+@dataclass(frozen=True)
+class LimitEvent:
+    """An event of a limit side (:meth:`kronlag.System.add_limit`, :mod:`kronlag.simulation.impacts`).
+
+    Attributes
+    ----------
+    t : float
+    side : str
+        The side: ``"<limit> lower"`` or ``"<limit> upper"``.
+    kind : str
+        ``"impact"`` (Newton's law applied: ``impulse``, gap speeds before and after), ``"contact"``
+        (the side is held as a constraint from here: ``force`` its contact force; after an impact
+        whose rebound fell below the Zeno threshold, or a start in contact) or ``"release"`` (its
+        contact force fell through zero: the side is free again).
+    q : (m,)
+        Coordinates at ``t``.
+    impulse : float
+        Of an impact: the generalized impulse along the gap (positive: pushing it open).
+    speed_before, speed_after : float
+        Of an impact: the gap speed ``J qd`` before (negative: closing) and after.
+    force : float
+        Of a contact: its force along the gap at ``t`` (positive: pressing).
+    reason : str
+        Why a contact began (e.g. the Zeno rule with its threshold).
+    """
+
+    t: float
+    side: str
+    kind: str
+    q: np.ndarray
+    impulse: float = 0.0
+    speed_before: float = 0.0
+    speed_after: float = 0.0
+    force: float = 0.0
+    reason: str = ""
+
+    def __str__(self) -> str:
+        if self.kind == "impact":
+            detail = (f"impulse {self.impulse:.6g}, gap speed {self.speed_before:.6g} -> "
+                      f"{self.speed_after:.6g}")
+        elif self.kind == "contact":
+            detail = f"held, force {self.force:.6g}" + (f" ({self.reason})" if self.reason else "")
+        else:
+            detail = "released"
+        return f"{self.kind} at {self.side} at t = {self.t:.9g}: {detail}"
 
 
 class ColumnExport:
@@ -184,8 +235,12 @@ class Trajectory(ColumnExport):
         accepted steps.
     wall_time : float
         Seconds spent in :func:`kronlag.simulate`.
-    events : tuple of SingularPassage
-        Passages through or near singular configurations, in time order.
+    events : tuple of SingularPassage and LimitEvent
+        Passages through or near singular configurations and the limits' impacts and contacts,
+        in time order.
+    limit_forces : (N, n) or None
+        For a model with limits: the force of each limit side's contact along its gap (0 when
+        not in contact), columns in the order of the sides (every bound of every limit, lower first).
     result : Result
         How the integration ended; :attr:`status` (0 success, -1 failure: the arrays then hold
         the solution up to the failure) and :attr:`success` follow from it.
@@ -201,7 +256,8 @@ class Trajectory(ColumnExport):
     velocity_residual(r+s)``; then, for
     every joint of the system (:meth:`kronlag.System.add_joint`), its reaction in world
     components (:meth:`reaction`): ``<joint>.Fx, <joint>.Fy[, <joint>.Fz]`` and
-    ``<joint>.Mz`` (planar) or ``<joint>.Mx, .My, .Mz`` (spatial).
+    ``<joint>.Mz`` (planar) or ``<joint>.Mx, .My, .Mz`` (spatial); for a model with limits, the contact
+    force of every limit side (:attr:`limit_forces`): ``<limit> lower.force``, ``<limit> upper.force``.
     """
 
     t: np.ndarray
@@ -222,8 +278,9 @@ class Trajectory(ColumnExport):
     njev: int
     steps: int
     wall_time: float
-    events: tuple[SingularPassage, ...] = ()
+    events: tuple[SingularPassage | LimitEvent, ...] = ()
     result: Result = Result.SUCCESS
+    limit_forces: np.ndarray | None = None
 
     @property
     def status(self) -> int:
@@ -281,6 +338,9 @@ class Trajectory(ColumnExport):
         ]
         columns = {name: values[:, i] for labels, values in blocks for i, name in enumerate(labels)}
         columns.update(reaction_columns(self.model, self.t, self.q, self.lam))
+        if self.limit_forces is not None:  # limits: each side's contact force
+            sides = [side.name for limit in self.model.equations.system.limits for side in limit.sides]
+            columns.update({f"{side}.force": self.limit_forces[:, i] for i, side in enumerate(sides)})
         return columns
 
     def reaction(self, name: str, *, frame: str = "world") -> Reaction:

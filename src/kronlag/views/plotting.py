@@ -24,6 +24,7 @@ from sympy.printing.conventions import split_super_sub
 
 from ..core.errors import InputError
 from ..numeric.reactions import GENERALIZED_FORCE_UNITS, REACTION_UNITS, multiplier_labels
+from ..simulation.trajectory import LimitEvent
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -243,12 +244,42 @@ def _panels(traj: Trajectory, reactions: bool | Sequence[str] | None
     if constrained:
         panels += [_multipliers_panel, _constraint_drift_panel]
     panels += [_energy_panel, _energy_drift_panel]
+    if traj.limit_forces is not None:
+        panels.append(_limit_forces_panel)
     joints = _selected_joints(traj, reactions)
     panels += [functools.partial(_reaction_force_panel, joint=joint) for joint in joints]
     couples = [joint for joint in joints if _transmits_couple(joint)]
     if couples:
         panels.append(functools.partial(_reaction_couple_panel, joints=couples))
     return panels
+
+
+def _limit_sides(traj: Trajectory) -> list[str]:
+    return [side.name for limit in traj.model.equations.system.limits for side in limit.sides]
+
+
+def _limit_forces_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
+    """The contact forces of the limit sides (0 while free)."""
+    # a generalized force: its unit is the energy's over the gap's (a force for a length, a torque for an angle)
+    _plot_series(axes, traj.t, traj.limit_forces, _limit_sides(traj), title="limit contact forces",
+                 ylabel="force along the gap")
+
+
+#: Most impacts labelled with their limit's name (a Zeno sequence has many; all are marked).
+_MAX_EVENT_LABELS = 12
+
+
+def _mark_limit_events(panels: list[Axes], traj: Trajectory) -> None:
+    """A vertical line at every limit event in every panel (impacts dashed, contacts and releases
+    dotted), the first impacts labelled with the side's name in the first panel."""
+    events = [event for event in traj.events if isinstance(event, LimitEvent)]
+    for k, event in enumerate(events):
+        style = "--" if event.kind == "impact" else ":"
+        for axes in panels:
+            axes.axvline(event.t, color="tab:gray", linestyle=style, linewidth=0.8, alpha=0.7)
+        if k < _MAX_EVENT_LABELS and panels:
+            panels[0].annotate(f"{event.kind}: {event.side}", (event.t, 1.0), xycoords=("data", "axes fraction"),
+                               rotation=90, fontsize=6, va="top", ha="right", color="tab:gray")
 
 
 def _title(traj: Trajectory) -> str:
@@ -312,6 +343,7 @@ def plot_trajectory(traj: Trajectory, *, path: str | PathLike | None = None, sho
     grid = figure.subplots(rows, 2, sharex=True, squeeze=False)
     for axes, panel in zip(grid.flat, panels):
         panel(axes, traj, units)
+    _mark_limit_events(list(grid.flat[:len(panels)]), traj)
     return _finish(figure, grid, used=len(panels), title=_title(traj), failed=traj.status != 0, units=units,
                    path=path, show=show)
 

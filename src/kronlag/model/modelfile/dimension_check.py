@@ -32,6 +32,11 @@ def check_file_dimensions(document: dict, model: ModelFile) -> None:
         check.system_uses()
         for i, drive in enumerate(model.drives.values()):
             check.same(drive.target, drive.motion, Place(f"drives[{i}].motion", f"drives[{i}].motion"))
+        for i, limit in enumerate(model.system.limits):
+            for key in ("lower", "upper"):
+                if getattr(limit, key) is not None:
+                    check.same(limit.value, getattr(limit, key), Place(f"limits[{i}].{key}", f"limits[{i}].{key}"))
+            check.use(limit.restitution, Dimension(), Place(f"limits[{i}].restitution", f"limits[{i}].restitution"))
         coordinates = {q.name: q for q in model.system.coordinates}
         for key, guesses in (("q", model.q_guess), ("qd", model.qd_guess)):
             for name, value in guesses.items():

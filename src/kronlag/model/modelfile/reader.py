@@ -189,7 +189,7 @@ def _read(document: dict, source: str) -> ModelFile:
     reader.table(document, "", required=("coordinates",), optional=(
         "name", "description", "gravity", "parameters", "points", "bodies", "constraints",
         "nonholonomic_constraints", *LOAD_FORMATS, "initial", "simulation", "drives", "drawing", "traces",
-        "joints"))
+        "joints", "limits"))
     name = reader.string(document.get("name", Path(source).stem), "name")
     description = reader.string(document.get("description", ""), "description")
     coordinate_list = document["coordinates"]
@@ -298,6 +298,7 @@ def _read_items(reader: _Reader, system: System, document: dict) -> None:
         for entry, table in reader.tables(document, key, required=form.required, optional=("name", *form.optional)):
             with reader.entry(entry):
                 form.read(reader, system, entry, table, reader.optional_name(table, entry))
+    _read_limits(reader, system, document)
     for entry, table in reader.tables(document, "drawing", required=("points",), optional=("name",)):
         points = table["points"]
         if not isinstance(points, list):
@@ -309,6 +310,19 @@ def _read_items(reader: _Reader, system: System, document: dict) -> None:
         point = reader.point(table["point"], f"{entry}.point")
         with reader.entry(entry):
             system.add_trace(point, name=reader.optional_name(table, entry))
+
+
+def _read_limits(reader: _Reader, system: System, document: dict) -> None:
+    """``[[limits]]``: ``expression`` of q bounded by ``lower`` and/or ``upper``, with ``restitution``."""
+    for entry, table in reader.tables(document, "limits", required=("expression",),
+                                      optional=("name", "lower", "upper", "restitution")):
+        bounds = {key: reader.expression(table[key], f"{entry}.{key}")
+                  for key in ("lower", "upper", "restitution") if key in table}
+        if "lower" not in bounds and "upper" not in bounds:
+            raise reader.error(entry, "give lower, upper or both")
+        expression = reader.expression(table["expression"], f"{entry}.expression")
+        with reader.entry(entry):
+            system.add_limit(expression, name=reader.optional_name(table, entry), **bounds)
 
 
 def _read_body_points(reader: _Reader, system: System, table, body: str, entry: str) -> None:

@@ -105,6 +105,10 @@ def _document(model: ModelFile) -> dict[str, Any]:
             raise ModelError(f"cannot write the load {load.name!r} ({type(load).__name__}): model files have no "
                              "table for it")
         document[load.file_table].append({"name": load.name, **LOAD_FORMATS[load.file_table].write(writer, load)})
+    document["limits"] = [{"name": limit.name, "expression": writer.expression(limit.value),
+                           **{key: writer.expression(getattr(limit, key)) for key in ("lower", "upper")
+                              if getattr(limit, key) is not None},
+                           "restitution": writer.expression(limit.restitution)} for limit in system.limits]
     document["initial"] = {"q": {k: writer.expression(v) for k, v in model.q_guess.items()},
                            "fixed": list(model.fixed),
                            "qd": {k: writer.expression(v) for k, v in model.qd_guess.items()},

@@ -45,6 +45,7 @@ typedef struct _generic_SUNMatrix *SUNMatrix;
 typedef struct _generic_SUNLinearSolver *SUNLinearSolver;
 typedef struct SUNContext_ *SUNContext;
 typedef int (*CVRhsFn)(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data);
+typedef int (*CVRootFn)(sunrealtype t, N_Vector y, sunrealtype *gout, void *user_data);
 
 extern int SUNDIALSGetVersionNumber(int *major, int *minor, int *patch, char *label, int len);
 extern int SUNContext_Create(SUNComm comm, SUNContext *ctx);
@@ -76,10 +77,14 @@ extern int CVodeGetNumJacEvals(void *mem, long *n);
 extern int CVodeGetLastOrder(void *mem, int *qlast);
 extern char *CVodeGetReturnFlagName(long flag);
 extern void CVodeFree(void **mem);
+/* limits: root finding (SUNDIALS 7 signatures) */
+extern int CVodeRootInit(void *mem, int nrtfn, CVRootFn g);
+extern int CVodeSetRootDirection(void *mem, int *rootdir);
+extern int CVodeGetRootInfo(void *mem, int *rootsfound);
 
 enum { KL_M = KRONLAG_M, KL_R = KRONLAG_R, KL_S = KRONLAG_S, KL_N = 2 * KRONLAG_M,
        KL_K = KRONLAG_R + KRONLAG_S, KL_TERMS_ = KRONLAG_DYNAMICS_SIZE };
-enum { CV_ADAMS = 1, CV_ONE_STEP = 2, CV_TOO_MUCH_WORK = -1 };
+enum { CV_ADAMS = 1, CV_ONE_STEP = 2, CV_TOO_MUCH_WORK = -1, CV_ROOT_RETURN = 2 };
 enum { KL_PHI = KRONLAG_DYNAMICS_PHI, KL_PHI_Q = KRONLAG_DYNAMICS_PHI_Q, KL_PHI_T = KRONLAG_DYNAMICS_PHI_T,
        KL_A = KRONLAG_DYNAMICS_A, KL_B = KRONLAG_DYNAMICS_B };
 /* Failures reported as KRONLAG_RESULT_SOLVER_FAILED and named by kronlag_cvode_flag_name, like
@@ -92,6 +97,7 @@ typedef struct {
     int generic_rank;                  /* of [Phi_q; A] at the start: redundant rows stay dependent */
     int singular;                      /* the right-hand side met a singular configuration ... */
     double t_singular, y_singular[KL_N];  /* ... there */
+    const kronlag_options *o;          /* limits: the watched functions (limits.c) */
 } kl_data;
 
 static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
@@ -108,6 +114,19 @@ static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
     data->t_singular = t;
     memcpy(data->y_singular, x, sizeof data->y_singular);
     return -1;
+}
+
+/* Limits: CVODE's root functions, the watched functions of limits.c at (t, y); the contact forces
+ * from the forward dynamics without Baumgarte terms. */
+static int kl_roots(sunrealtype t, N_Vector y, sunrealtype *gout, void *user_data)
+{
+    kl_data *data = user_data;
+    const double *x = N_VGetArrayPointer(y);
+    double qdd[KL_M + 1], lam[KL_R + 1], mu[KL_S + 1];
+    if (data->o->n_contacts > 0
+        && kronlag_forward_dynamics(t, x, x + KL_M, data->p, 0.0, 0.0, qdd, lam, mu)) return -1;
+    kl_limit_values(data->o, x, lam, gout);
+    return 0;
 }
 
 /* The constraint rows B = [Phi_q; A] (k x m) and offsets c = [Phi_t; b] at (t, q): B qd + c = 0. */
@@ -223,7 +242,7 @@ int kronlag_cvode(kronlag_options *o)
     memcpy(y_end, o->y0, KL_N * sizeof(double));
     if (major != 7) return KL_VERSION_MISMATCH;
     int n_eval = o->n_eval;
-    kl_data data = {p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}};
+    kl_data data = {p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}, o};
     SUNContext ctx = NULL;
     N_Vector y = NULL, dense = NULL;
     SUNMatrix J = NULL;
@@ -250,6 +269,12 @@ int kronlag_cvode(kronlag_options *o)
         || CVodeSetLinearSolver(mem, LS, J) || (o->max_order > 0 && CVodeSetMaxOrd(mem, o->max_order))
         || CVodeSetMaxNumSteps(mem, o->max_steps) || CVodeSetStopTime(mem, t1) || CVodeSetMaxHnilWarns(mem, -1))
         goto done;
+    int n_roots = kl_limit_count(o);
+    if (n_roots > 0) {  /* limits: a segment ends where a watched function falls through zero */
+        int directions[n_roots];
+        for (int i = 0; i < n_roots; ++i) directions[i] = -1;
+        if (CVodeRootInit(mem, n_roots, kl_roots) || CVodeSetRootDirection(mem, directions)) goto done;
+    }
     flag = KRONLAG_RESULT_SUCCESS;
     if (n_eval == 0) {
         o->t_out[0] = t0;
@@ -269,6 +294,7 @@ int kronlag_cvode(kronlag_options *o)
         flag = CVode(mem, t1, y, &t, CV_ONE_STEP);
         if (flag == CV_TOO_MUCH_WORK) flag = KRONLAG_RESULT_MAX_STEPS;
         if (flag < 0) break;
+        int rooted = n_roots > 0 && flag == CV_ROOT_RETURN;
         flag = KRONLAG_RESULT_SUCCESS;
         int order = 0;
         CVodeGetLastOrder(mem, &order);
@@ -298,12 +324,19 @@ int kronlag_cvode(kronlag_options *o)
             }
             if (flag) break;
         }
+        if (rooted) {  /* limits: CVODE stopped at the root, t and x are there */
+            int found[n_roots];
+            CVodeGetRootInfo(mem, found);
+            for (int i = 0; i < n_roots; ++i) o->roots[i] = found[i] != 0;
+            flag = KRONLAG_RESULT_LIMIT;
+            break;
+        }
         int stop = kl_progress_report(o, &progress, t);
         if (stop) { flag = stop; break; }
         if (ratio < KRONLAG_APPROACH_RTOL || kl_rank_rose(t, x, &data)) { flag = KRONLAG_RESULT_APPROACH; break; }
     }
     memcpy(y_end, x, KL_N * sizeof(double));
-    if (flag == KRONLAG_RESULT_APPROACH && kl_project(t, y_end, &data)) flag = KRONLAG_RESULT_PROJECTION_FAILED;
+    if ((flag == KRONLAG_RESULT_APPROACH || flag == KRONLAG_RESULT_LIMIT) && kl_project(t, y_end, &data)) flag = KRONLAG_RESULT_PROJECTION_FAILED;
     if (flag < 0 && data.singular) {
         flag = KRONLAG_RESULT_SINGULAR;
         t = data.t_singular;

@@ -203,6 +203,52 @@ static void kl3_output(kl3_state *s, kronlag_options *o, int row, int current, d
     }
 }
 
+/* The dense output at t + theta h inside the step from (q, v, a, lam) to (qn, vn, an, lamn): cubic
+ * Hermite in q and v, linear in a and lam. */
+static void kl3_interpolate(double theta, double h, const double *q, const double *v, const double *a,
+                            const double *lam, const double *qn, const double *vn, const double *an,
+                            const double *lamn, double *qi, double *vi, double *ai, double *li)
+{
+    double h00 = (1 + 2 * theta) * (1 - theta) * (1 - theta), h10 = theta * (1 - theta) * (1 - theta);
+    double h01 = theta * theta * (3 - 2 * theta), h11 = theta * theta * (theta - 1);
+    for (int i = 0; i < KL3_M; ++i) {
+        qi[i] = h00 * q[i] + h10 * h * v[i] + h01 * qn[i] + h11 * h * vn[i];
+        vi[i] = h00 * v[i] + h10 * h * a[i] + h01 * vn[i] + h11 * h * an[i];
+        ai[i] = (1 - theta) * a[i] + theta * an[i];
+    }
+    for (int k = 0; k < KL3_R; ++k) li[k] = (1 - theta) * lam[k] + theta * lamn[k];
+}
+
+/* Limits: the first theta in (0, 1] of the step where a watched function of limits.c falls through
+ * zero (o->roots marks those that fell within the step, before: their values at its start, after:
+ * at its end), by the Illinois variant of regula falsi on the dense output; o->roots is left marking
+ * the functions that reach zero there. */
+static double kl3_locate(const kronlag_options *o, double h, const double *q, const double *v, const double *a,
+                         const double *lam, const double *qn, const double *vn, const double *an,
+                         const double *lamn, const double *before, const double *after)
+{
+    int n = kl_limit_count(o);
+    double first = 1.0, found[n], values[n], qi[KL3_M], vi[KL3_M], ai[KL3_M], li[KL3_R + 1];
+    for (int i = 0; i < n; ++i) {
+        found[i] = 2.0;
+        if (o->roots[i] == 0.0) continue;
+        double lo = 0.0, hi = 1.0, f_lo = before[i], f_hi = after[i];
+        int side = 0;
+        for (int iteration = 0; iteration < 100 && hi - lo > 1e-15 && f_hi != 0.0; ++iteration) {
+            double theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
+            if (!(theta > lo && theta < hi)) theta = 0.5 * (lo + hi);
+            kl3_interpolate(theta, h, q, v, a, lam, qn, vn, an, lamn, qi, vi, ai, li);
+            kl_limit_values(o, qi, li, values);
+            if (values[i] > 0.0) { lo = theta; f_lo = values[i]; if (side == 1) f_hi *= 0.5; side = 1; }
+            else { hi = theta; f_hi = values[i]; if (side == -1) f_lo *= 0.5; side = -1; }
+        }
+        found[i] = hi;
+        first = fmin(first, hi);
+    }
+    for (int i = 0; i < n; ++i) o->roots[i] = found[i] <= first + 1e-12;
+    return first;
+}
+
 /* Integrate from o->t0 (o->y0 = [q0, v0] consistent, o->a0 and o->lam0 from forward dynamics) to
  * o->t1.  Outputs at the n_eval times t_eval (dense output: cubic Hermite in q and v, linear in a
  * and lam) or, with n_eval == 0, at every step (at most max_rows rows), with the derived
@@ -243,6 +289,8 @@ int kronlag_index3(kronlag_options *o)
     kl_progress progress = {kl_clock()};
     kl_monitor_start(&monitor, t0, q, s.terms + KRONLAG_DYNAMICS_PHI_Q, o->events, o->max_events);
     int rows = 0, flag = KRONLAG_RESULT_SUCCESS, next = 0, retry = 0;
+    int n_roots = kl_limit_count(o), rooted = 0;  /* limits: the watched functions at the step's start */
+    double before[n_roots + 1], after[n_roots + 1];
     long steps = 0;
     double t = t0;
     if (n_eval == 0) {
@@ -257,6 +305,7 @@ int kronlag_index3(kronlag_options *o)
      * the rounding of q amplified by 4/h^2; the error test shortens a step that is too long */
     double h = o->h0 > 0.0 ? o->h0 : KL3_FIRST_STEP * (t1 - t0);
     if (max_step > 0.0) h = fmin(h, max_step);
+    if (n_roots > 0) kl_limit_values(o, q, lam, before);
     while (t < t1) {
         if (steps >= o->max_steps) { flag = KRONLAG_RESULT_MAX_STEPS; break; }
         int last = t + h >= t1 - h_min;
@@ -274,27 +323,36 @@ int kronlag_index3(kronlag_options *o)
         }
         retry = 0;
         double t_new = last ? t1 : t + h;
+        if (n_roots > 0) {  /* limits: the step ends where a watched function falls through zero */
+            kl_limit_values(o, qn, lamn, after);
+            if (kl_limit_fell(o, before, after)) {
+                double theta = kl3_locate(o, h, q, v, a, lam, qn, vn, an, lamn, before, after), li[r + 1];
+                double qi[m], vi[m], ai[m];
+                kl3_interpolate(theta, h, q, v, a, lam, qn, vn, an, lamn, qi, vi, ai, li);
+                memcpy(qn, qi, sizeof qi); memcpy(vn, vi, sizeof vi); memcpy(an, ai, sizeof ai);
+                memcpy(lamn, li, r * sizeof(double));
+                h *= theta;
+                t_new = t + h;
+                rooted = 1;
+            }
+            memcpy(before, after, n_roots * sizeof(double));
+        }
         /* the terms of the step's last evaluation are those of (qn, vn) */
         double ratio = kl_monitor_observe(&monitor, t_new, qn, s.terms + KRONLAG_DYNAMICS_PHI_Q);
         if (n_eval == 0) {
             if (rows == o->max_rows) { flag = KRONLAG_RESULT_OUTPUTS_FULL; break; }
-            kl3_output(&s, o, rows++, 1, t_new, qn, vn, an);
+            kl3_output(&s, o, rows++, !rooted, t_new, qn, vn, an);
         } else {
             for (; next < n_eval && t_eval[next] <= t_new; ++next) {
-                double theta = (t_eval[next] - t) / h, qi[m], vi[m], ai[m];
-                double h00 = (1 + 2 * theta) * (1 - theta) * (1 - theta), h10 = theta * (1 - theta) * (1 - theta);
-                double h01 = theta * theta * (3 - 2 * theta), h11 = theta * theta * (theta - 1);
-                for (int i = 0; i < m; ++i) {
-                    qi[i] = h00 * q[i] + h10 * h * v[i] + h01 * qn[i] + h11 * h * vn[i];
-                    vi[i] = h00 * v[i] + h10 * h * a[i] + h01 * vn[i] + h11 * h * an[i];
-                    ai[i] = (1 - theta) * a[i] + theta * an[i];
-                }
+                double theta = (t_eval[next] - t) / h, qi[m], vi[m], ai[m], li[r + 1];
+                kl3_interpolate(theta, h, q, v, a, lam, qn, vn, an, lamn, qi, vi, ai, li);
                 kl3_output(&s, o, rows++, 0, t_eval[next], qi, vi, ai);
             }
         }
         t = t_new;
         memcpy(q, qn, sizeof q); memcpy(v, vn, sizeof v); memcpy(a, an, sizeof a); memcpy(lam, lamn, sizeof lam);
         ++steps;
+        if (rooted) { flag = KRONLAG_RESULT_LIMIT; break; }
         int stop = kl_progress_report(o, &progress, t);
         if (stop) { flag = stop; break; }
         if (o->handback && ratio > KRONLAG_LEAVE_RTOL && t < t1) { flag = KRONLAG_HANDBACK; break; }

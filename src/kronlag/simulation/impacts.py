@@ -1,0 +1,278 @@
+"""Limits, stops and impacts during a run (:meth:`kronlag.System.add_limit`).
+
+A run of a model with limits is a sequence of segments, each integrated by the chosen method with
+a :class:`~.watch.LimitWatch`: the gaps of the free sides and the contact forces of the sides held
+as constraints.  A segment ends where one of them falls through zero (root finding to the
+integrator's tolerance), and there:
+
+* **impact** (a gap closed): Newton's restitution law with a generalized impulse that keeps every
+  bilateral constraint, from::
+
+      [[M, B^T, J^T], [B, 0, 0], [J, 0, 0]] [qd+ - qd-; Lambda; P] = [0; 0; -(1 + e) J qd-]
+
+  with ``B = [Phi_q; A]`` (the contacts held included) and ``J`` the rows of the impacting sides:
+  ``B qd+ = B qd-`` (= ``-c``: the velocity constraints hold) and ``J qd+ = -e J qd-``;
+* **contact** (the Zeno rule): an impact whose rebound would lift the gap by at most
+  :data:`~kronlag.numeric.tolerances.RESTING_GAP` ``atol`` (``v+^2 <= 2 |a| RESTING_GAP atol``,
+  ``a < 0`` the gap acceleration in free motion), or with ``e = 0``, ends with ``J qd+ = 0`` and the
+  side held as a bilateral constraint (a row added to the augmented system: the model derived
+  again with the gap as a constraint, once per set of contacts);
+* **release**: a held side whose contact force ``-lambda`` falls through zero is free again.
+
+Each is a :class:`~.trajectory.LimitEvent` in ``trajectory.events``; ``trajectory.limit_forces``
+holds the contact forces.
+"""
+
+from __future__ import annotations
+
+import copy
+import weakref
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from ..core.errors import InputError
+from ..numeric.limit_kernels import LimitKernels, limit_kernels
+from ..numeric.numeric_model import NumericModel
+from ..numeric.projection import project_positions
+from ..numeric.tolerances import CONTACT_GAP, RESTING_GAP
+from ..symbolic.derivation import derive
+from .problem import MultibodyProblem, Solution, Solver, derived_shapes
+from .trajectory import LimitEvent, Result
+from .watch import LimitWatch
+
+__all__ = ["has_limits", "solve_with_limits", "contact_model"]
+
+
+#: Most events at one instant (simultaneous impacts, a contact made and released) before the run
+#: ends as failed: events that do not let time advance.
+_MAX_EVENTS_AT_ONE_TIME = 20
+
+
+def has_limits(model: NumericModel) -> bool:
+    """Whether ``model``'s system has limits."""
+    return bool(getattr(model.equations.system, "limits", ()))
+
+
+# -- the models with contacts held as constraints ------------------------------------------------
+
+_CONTACT_EQUATIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_CONTACT_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def contact_model(model: NumericModel, active: tuple[int, ...]) -> NumericModel:
+    """``model`` with the limit sides ``active`` (indices, increasing) held as constraints ``g_i(q) = 0``,
+    appended after its own (named ``"contact <side>"``); derived and compiled once per set."""
+    if not active:
+        return model
+    models = _CONTACT_MODELS.setdefault(model, {})
+    if active not in models:
+        system = model.equations.system
+        by_set = _CONTACT_EQUATIONS.setdefault(model.equations, {})
+        if active not in by_set:
+            sides = limit_kernels(system).sides
+            variant = copy.copy(system)
+            variant.constraints = list(system.constraints)
+            for i in active:
+                variant.add_constraint(sides[i].gap, name=f"contact {sides[i].name}")
+            by_set[active] = derive(variant)
+        parameters = model.__getstate__()["parameters"]
+        models[active] = NumericModel(by_set[active], parameters, backend=model.backend, rank_rtol=model.rank_rtol)
+    return models[active]
+
+
+# -- the run -----------------------------------------------------------------------------------------
+
+def check_start(model: NumericModel, q0: np.ndarray, t0: float, atol: float) -> None:
+    """InputError naming the limit, its value and the bound for a limit violated at the start."""
+    kernels = limit_kernels(model.equations.system)
+    values = kernels.evaluate(q0, np.zeros_like(q0), model.parameter_vector(t0))
+    for side, gap, bound in zip(kernels.sides, values["gap"], values["bound"]):
+        if gap < -CONTACT_GAP * atol:
+            lower = side.name.endswith("lower")
+            value = bound + gap if lower else bound - gap
+            where = "below the lower" if lower else "above the upper"
+            raise InputError(f"limit {side.limit!r}: its value {value:.9g} is {where} bound {bound:.9g} at the "
+                             "initial state")
+
+
+def solve_with_limits(solver: Solver, problem: MultibodyProblem,
+                      derived_of: Callable[[NumericModel, np.ndarray, np.ndarray], dict]) -> Solution:
+    """Integrate ``problem`` with ``solver``, segment by segment, through the limits' events (see the
+    module docstring); ``derived_of(model, t, y)`` computes the derived outputs a solver leaves out."""
+    model, options = problem.model, solver.options
+    if solver.name == "ggl":
+        raise InputError("method='ggl' does not watch limits; use 'switching' (the default), 'compiled', "
+                         "'ali3p', 'baumgarte' or 'projection'")
+    check_start(model, problem.q0, problem.t0, options.atol)
+    run = _LimitRun(solver, problem, derived_of)
+    return run.solve()
+
+
+class _LimitRun:
+    """The state of one run with limits: the sides held, the segments and the events so far."""
+
+    def __init__(self, solver: Solver, problem: MultibodyProblem, derived_of):
+        self.solver, self.problem, self.derived_of = solver, problem, derived_of
+        self.model, self.options = problem.model, solver.options
+        self.kernels: LimitKernels = limit_kernels(self.model.equations.system)
+        self.active: tuple[int, ...] = ()
+        self.events: list = []
+        self.pieces: list[dict[str, np.ndarray]] = []
+        self._last_impulses: dict[int, float] = {}
+        self.first_step = 0.0
+
+    def solve(self) -> Solution:
+        problem, m, n = self.problem, self.problem.m, len(self.kernels)
+        t, y = problem.t0, problem.y0
+        y = self._start(t, y)
+        steps = nfev = njev = 0
+        same_time, last_t = 0, None
+        while True:
+            variant = contact_model(self.model, self.active)
+            watch = LimitWatch(self.kernels, np.array([i not in self.active for i in range(n)]),
+                               tuple(range(self.model.r, variant.r)), self.first_step,
+                               None if variant.time_varying else variant.parameter_vector(t))
+            self.first_step = 0.0
+            t_eval = problem.t_eval
+            if t_eval is not None and t > problem.t0:
+                t_eval = t_eval[t_eval > t]
+            keep = t_eval is None or len(t_eval) > 0
+            segment = replace(problem, model=variant, t0=t, q0=y[:m], qd0=y[m:], watch=watch,
+                              t_eval=t_eval if keep else None)
+            budget = replace(self.options, max_steps=max(self.options.max_steps - steps, 0))
+            solution = type(self.solver)(budget).solve(segment)
+            steps, nfev, njev = steps + solution.steps, nfev + solution.nfev, njev + solution.njev
+            self.events += solution.events
+            if keep and len(solution.t):
+                self._keep(solution, variant)
+            if solution.result is not Result.LIMIT or solution.stop is None:
+                return self._solution(solution.result, solution.message, steps, nfev, njev)
+            same_time = same_time + 1 if last_t is not None and solution.stop.t <= last_t else 0
+            last_t = solution.stop.t
+            if same_time > _MAX_EVENTS_AT_ONE_TIME:
+                return self._solution(Result.SOLVER_FAILED, f"Integration failed at t = {last_t:.6g}: the limits' "
+                                      f"events do not let time advance ({same_time} at this instant)",
+                                      steps, nfev, njev)
+            t, y = solution.stop.t, self._events(solution.stop.t, solution.stop.y, solution.stop.triggered)
+
+    # -- events ------------------------------------------------------------------------------
+
+    def _start(self, t: float, y: np.ndarray) -> np.ndarray:
+        """The sides in contact at the start (gap within :data:`CONTACT_GAP` ``atol``) treated as impacts."""
+        gaps = self.kernels.gap(y[:self.problem.m], self.model.parameter_vector(t))
+        touching = tuple(int(i) for i in np.flatnonzero(gaps <= CONTACT_GAP * self.options.atol))
+        return self._events(t, y, touching) if touching else y
+
+    def _events(self, t: float, y: np.ndarray, triggered: tuple[int, ...]) -> np.ndarray:
+        """Apply the events ``triggered`` (indices of the watched functions) at ``(t, y)``; the state after."""
+        n, m = len(self.kernels), self.problem.m
+        released = [self.active[k - n] for k in triggered if k >= n]
+        for i in released:
+            self.events.append(LimitEvent(t=t, side=self.kernels.names[i], kind="release", q=y[:m].copy()))
+        self.active = tuple(i for i in self.active if i not in released)
+        impacting = [i for i in triggered if i < n and i not in self.active]
+        if not impacting:
+            return self._project(t, y)
+        # on the stops exactly (the root's state is off them by the root's tolerance or an
+        # interpolation's error): a gap left below zero would hide the next crossing
+        touching = contact_model(self.model, tuple(sorted(set(self.active) | set(impacting))))
+        q = project_positions(touching, y[:m], t, tol=self.options.projection_tol).q
+        y = self._project(t, np.concatenate([q, y[m:]]))
+        q, qd = y[:m], y[m:]
+        values = self.kernels.evaluate(q, qd, self.model.parameter_vector(t))
+        J, e = values["J"], values["restitution"]
+        before = J[impacting] @ qd
+        closing = [i for i, speed in zip(impacting, before) if speed < 0]
+        qd_after = self._impulse(t, q, qd, closing, J, e) if closing else qd
+        # the Zeno rule: a rebound that lifts the gap by at most RESTING_GAP atol (or none) makes a contact
+        free = contact_model(self.model, self.active).forward_dynamics(q, qd_after, t)
+        acceleration = J @ free.qdd + values["gamma"]
+        rest_height = RESTING_GAP * self.options.atol
+        resting = [i for i in impacting
+                   if acceleration[i] < 0 and (J[i] @ qd_after) ** 2 <= 2 * -acceleration[i] * rest_height]
+        if resting:
+            zero = e.copy()
+            zero[resting] = 0.0
+            qd_after = self._impulse(t, q, qd, [i for i in impacting if J[i] @ qd < 0 or i in resting], J, zero)
+        impulses = self._last_impulses
+        flights = [2 * (J[i] @ qd_after) / -acceleration[i] for i in impacting
+                   if i not in resting and acceleration[i] < 0 and J[i] @ qd_after > 0]
+        self.first_step = 0.25 * min(flights) if flights else 0.0
+        for i, speed in zip(impacting, before):
+            if speed < 0:
+                self.events.append(LimitEvent(t=t, side=self.kernels.names[i], kind="impact", q=q.copy(),
+                                              impulse=impulses.get(i, 0.0), speed_before=float(speed),
+                                              speed_after=float(J[i] @ qd_after)))
+        if resting:
+            held = tuple(sorted(set(self.active) | set(resting)))
+            lam = contact_model(self.model, held).forward_dynamics(q, qd_after, t).lam
+            forces = {i: float(-lam[self.model.r + k]) for k, i in enumerate(held)}
+            resting = [i for i in resting if forces[i] > 0]  # a contact that would pull is not held
+            self.active = tuple(sorted(set(self.active) | set(resting)))
+            for i in resting:
+                speed = float(before[impacting.index(i)])
+                threshold = np.sqrt(2 * -acceleration[i] * rest_height)
+                reason = (f"rebound speed {-e[i] * speed:.3g} <= {threshold:.3g}, a rebound height <= "
+                          f"{RESTING_GAP:g} atol" if speed < 0 else "on the stop and pressed against it")
+                self.events.append(LimitEvent(t=t, side=self.kernels.names[i], kind="contact", q=q.copy(),
+                                              force=forces[i], reason=reason))
+        return self._project(t, np.concatenate([q, qd_after]))
+
+    def _impulse(self, t: float, q: np.ndarray, qd: np.ndarray, sides: list[int], J: np.ndarray,
+                 restitution: np.ndarray) -> np.ndarray:
+        """``qd+`` after the impulse on ``sides`` (see the module docstring); the impulses by side are
+        kept in ``_last_impulses`` (positive: pushing the gap open)."""
+        model = contact_model(self.model, self.active)
+        terms = model.dynamics_terms(q, qd, t)
+        B = np.vstack([terms["Phi_q"].reshape(-1, len(q)), terms["A"].reshape(-1, len(q))])
+        rows = J[sides]
+        m, k, c = len(q), B.shape[0], len(sides)
+        matrix = np.zeros((m + k + c, m + k + c))
+        matrix[:m, :m] = terms["M"]
+        matrix[:m, m:m + k], matrix[m:m + k, :m] = B.T, B
+        matrix[:m, m + k:], matrix[m + k:, :m] = rows.T, rows
+        right = np.zeros(m + k + c)
+        right[m + k:] = -(1 + restitution[sides]) * (rows @ qd)
+        # least squares: redundant constraint rows leave the matrix singular but the velocities determined
+        solution = np.linalg.lstsq(matrix, right, rcond=None)[0]
+        self._last_impulses = {i: float(-solution[m + k + j]) for j, i in enumerate(sides)}
+        return qd + solution[:m]
+
+    def _project(self, t: float, y: np.ndarray) -> np.ndarray:
+        """``y`` projected onto the constraints of the current contact set."""
+        held = replace(self.problem, model=contact_model(self.model, self.active), watch=None)
+        return held.project(t, y, self.options.projection_tol)
+
+    # -- outputs -------------------------------------------------------------------------------
+
+    def _keep(self, solution: Solution, variant: NumericModel) -> None:
+        """The outputs of a segment with the contact rows taken out of the multipliers and residuals
+        (they go to ``limit_forces``)."""
+        r, s = self.model.r, self.model.s
+        derived = solution.derived if solution.derived is not None else self.derived_of(variant, solution.t,
+                                                                                          solution.y)
+        held = variant.r - r
+        forces = np.zeros((len(solution.t), len(self.kernels)))
+        for k, i in enumerate(self.active):
+            forces[:, i] = -derived["lam"][:, r + k]
+        velocity = derived["velocity_residual"]
+        piece = dict(derived, lam=derived["lam"][:, :r], position_residual=derived["position_residual"][:, :r],
+                     velocity_residual=np.concatenate([velocity[:, :r], velocity[:, r + held:r + held + s]], axis=1),
+                     limit_forces=forces, t=solution.t, y=solution.y)
+        self.pieces.append(piece)
+
+    def _empty(self) -> dict[str, np.ndarray]:
+        """The outputs of a run that ended before its first output."""
+        m, r, s = self.model.shape
+        return {**{name: np.empty(shape) for name, shape in derived_shapes(0, m, r, s).items()},
+                "limit_forces": np.empty((0, len(self.kernels))), "t": np.empty(0), "y": np.empty((0, 2 * m))}
+
+    def _solution(self, result: Result, message: str, steps: int, nfev: int, njev: int) -> Solution:
+        pieces = self.pieces or [self._empty()]
+        joined = {key: np.concatenate([piece[key] for piece in pieces]) for key in pieces[0]}
+        t, y = joined.pop("t"), joined.pop("y")
+        events = tuple(sorted(self.events, key=lambda event: event.t))
+        return Solution(t=t, y=y, result=result, message=message, nfev=nfev, njev=njev, steps=steps,
+                        derived=joined, events=events)
