@@ -120,6 +120,9 @@ class Solution:
         (N, r + s) at the outputs, when the solver computed them (else :func:`simulate` does).
     events : tuple of SingularPassage
         Singular configurations passed.
+    parameters : (N, P) or None
+        Under a controller (:mod:`.controllers`), the parameter values at the outputs, when the
+        solver recorded them (else :func:`simulate` does).
     """
 
     t: np.ndarray
@@ -131,6 +134,7 @@ class Solution:
     steps: int
     derived: dict[str, np.ndarray] | None = None
     events: tuple[SingularPassage, ...] = ()
+    parameters: np.ndarray | None = None
 
     #: The keys of :attr:`derived` (:func:`derived_shapes`).
     DERIVED: ClassVar[tuple[str, ...]] = tuple(derived_shapes(0, 0, 0, 0))
@@ -201,6 +205,9 @@ class Solver(ABC):
     requirements: ClassVar[str] = "nothing"
     #: Default Baumgarte ``alpha`` and ``beta`` of the index-1 ODE it integrates (0: none).
     stabilization: ClassVar[float] = 0.0
+    #: It stops at the sample instants of a :class:`~kronlag.simulation.controllers.Sampled` controller
+    #: itself (a compiled driver); else :func:`simulate` runs it from one sample instant to the next.
+    samples_inside: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)

@@ -11,7 +11,7 @@ with time along the first axis of every array, and exports it as columns.
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from os import PathLike
 from typing import TYPE_CHECKING, Any
@@ -54,7 +54,7 @@ class Result(enum.Enum):
     PROJECTION_FAILED = -1002, "the projection onto the constraints failed"
     OUTPUTS_FULL = -1006, "more steps than output rows: pass t_eval to choose the outputs"
     INTERRUPTED = -1007, "interrupted (Ctrl-C, SIGINT)"
-    RAISED = -1008, "a callback (a time-varying parameter or progress) raised an exception"
+    RAISED = -1008, "a callback (a controller, a time-varying parameter or progress) raised an exception"
     SOLVER_FAILED = -1000, "the integrator failed"
 
     code: int
@@ -174,6 +174,9 @@ class Trajectory(ColumnExport):
     result : Result
         How the integration ended; :attr:`status` (0 success, -1 failure: the arrays then hold
         the solution up to the failure) and :attr:`success` follow from it.
+    inputs : dict of str to (N,)
+        Under ``simulate(controller=...)``, the values the controller set, by parameter name, at
+        the outputs (held values between samples of a ``Sampled`` one); else empty.
 
     Notes
     -----
@@ -208,6 +211,7 @@ class Trajectory(ColumnExport):
     wall_time: float
     events: tuple[SingularPassage, ...] = ()
     result: Result = Result.SUCCESS
+    inputs: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def status(self) -> int:
