@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..core.errors import InputError
+from ..model.modelfile.controller import PID, StateFeedback
 from ..numeric.numeric_model import NumericModel
 from .control import RunControl
 from .interface import Controller
@@ -34,7 +35,8 @@ from .problem import MultibodyProblem, Solution, Solver
 from .stepping import stopped_text
 from .trajectory import Result
 
-__all__ = ["Sampled", "ControlLoop", "ControlledModel", "controlled", "solve_sampled", "CONTINUOUS", "SAMPLED"]
+__all__ = ["Sampled", "ControlLoop", "ControlledModel", "controlled", "solve_sampled", "file_controller", "CONTINUOUS",
+           "SAMPLED"]
 
 
 #: ``kronlag_options.control_mode``: the controller is called at every evaluation ...
@@ -342,3 +344,32 @@ def _without_last_row(solution: Solution) -> Solution:
     derived = None if solution.derived is None else {key: value[:-1] for key, value in solution.derived.items()}
     return replace(solution, t=solution.t[:-1], y=solution.y[:-1], derived=derived,
                    parameters=None if solution.parameters is None else solution.parameters[:-1])
+
+
+def file_controller(spec: StateFeedback | PID, model: NumericModel) -> Callable | Sampled:
+    """The controller of a model file's ``[controller]`` table (:mod:`kronlag.model.modelfile.controller`)
+    for ``simulate(model, ..., controller=...)``: a function ``(t, q, qd) -> {input: value}``, or a
+    :class:`Sampled` one (with a ``period``; a PID carries its integral as the state)."""
+    m, index = model.m, {name: i for i, name in enumerate(model.coordinate_names)}
+    index.update({f"{name}d": m + i for i, name in enumerate(model.coordinate_names)})
+    name = spec.input
+    if isinstance(spec, PID):
+        i = index[spec.coordinate]
+        setpoint, period = spec.setpoint, spec.period
+        kp, ki, kd = spec.kp.value, spec.ki.value, spec.kd.value
+
+        def pid(t: float, q: np.ndarray, qd: np.ndarray, integral: float):
+            error = setpoint - q[i]
+            integral = integral + period * error
+            return {name: kp * error + ki * integral - kd * qd[i]}, integral
+
+        return Sampled(pid, period=period, state=0.0)
+    rows = np.array([index[state] for state in spec.states])
+    gains = np.array([gain.value for gain in spec.gains])
+    reference = np.array(spec.reference)
+
+    def state_feedback(t: float, q: np.ndarray, qd: np.ndarray) -> dict[str, float]:
+        x = np.concatenate((q, qd))[rows]
+        return {name: -float(gains @ (x - reference))}
+
+    return state_feedback if spec.period is None else Sampled(state_feedback, period=spec.period)

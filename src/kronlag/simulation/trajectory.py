@@ -232,7 +232,7 @@ class Trajectory(ColumnExport):
     def nonconservative_work(self) -> np.ndarray:
         """``W(t) = integral qd^T (f_Q - Phi_q^T lambda - A^T mu) dt`` from ``t[0]``: the work of applied
         forces and torques, dampers, generalized forces and drives, shape (N,); see :mod:`kronlag.simulation.energy`."""
-        return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd)
+        return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd, inputs=self.inputs)
 
     @property
     def energy_balance(self) -> np.ndarray:
