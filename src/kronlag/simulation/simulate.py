@@ -20,7 +20,7 @@ from ..numeric.linalg import velocity_constraints
 from .control import RunControl
 from .controllers import ControlledModel, ControlLoop, Sampled, controlled, solve_sampled
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
-from .solvers import AUTO_PREFERENCE, METHODS
+from .solvers import AUTO_PREFERENCE, METHODS, SAMPLED_PREFERENCE
 from .trajectory import Trajectory
 
 if TYPE_CHECKING:
@@ -137,7 +137,10 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
             C backend and no time-varying parameter);
         ``'auto'``
             the first of :data:`AUTO_PREFERENCE` (``'switching'``,
-            ``'compiled'``, ``'projection'``) that the model allows.
+            ``'compiled'``, ``'projection'``) that the model allows; under a
+            :class:`~kronlag.Sampled` controller the first of :data:`SAMPLED_PREFERENCE`
+            (``'ali3p'``, ``'compiled'``, ``'projection'``): a one-step method restarts at
+            the samples without cost.
 
         The index-1 methods stop with status -1 at the approach to a singular
         configuration, where they cannot tell the branches of the motion apart.
@@ -211,7 +214,7 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         max_steps = span_steps
     if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 1):
         raise InputError(f"max_steps must be an integer >= 1, got {max_steps!r}")
-    solver = _resolve_method(method, model)
+    solver = _resolve_method(method, model, sampled=isinstance(controller, Sampled))
     default_stabilization = solver.stabilization
     control = RunControl()
     options = SolverOptions(rtol=rtol, atol=atol, max_step=np.inf if max_step is None else float(max_step),
@@ -278,15 +281,17 @@ def _consistent_start(problem: MultibodyProblem, options: SolverOptions) -> tupl
     return y0[:m], y0[m:]
 
 
-def _resolve_method(method: str | type[Solver], model: NumericModel) -> type[Solver]:
-    """The solver class ``method`` names (``"auto"``: the first of :data:`AUTO_PREFERENCE` that
-    supports ``model``), or ``method`` itself if it is a concrete :class:`Solver` subclass."""
+def _resolve_method(method: str | type[Solver], model: NumericModel, *, sampled: bool = False) -> type[Solver]:
+    """The solver class ``method`` names (``"auto"``: the first of :data:`AUTO_PREFERENCE`, or of
+    :data:`SAMPLED_PREFERENCE` under a sampled controller, that supports ``model``), or ``method``
+    itself if it is a concrete :class:`Solver` subclass."""
     if isinstance(method, type) and issubclass(method, Solver):
         if inspect.isabstract(method) or not isinstance(getattr(method, "name", None), str):
             raise InputError(f"method={method.__name__} is not a complete Solver: it must define name and solve()")
         return method
     if isinstance(method, str) and method == "auto":
-        return next(METHODS[name] for name in AUTO_PREFERENCE if METHODS[name].supports(model))
+        preference = SAMPLED_PREFERENCE if sampled else AUTO_PREFERENCE
+        return next(METHODS[name] for name in preference if METHODS[name].supports(model))
     if isinstance(method, str) and method in METHODS:
         return METHODS[method]
     raise InputError(f"unknown method {method!r}; choose from 'auto', {', '.join(map(repr, METHODS))} "
