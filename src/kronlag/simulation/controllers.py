@@ -147,7 +147,7 @@ class ControlLoop:
     def _refuse(self, values, t: float, q: np.ndarray) -> None:
         """InputError for what the controller returned at ``(t, q)``: not a mapping, an unknown key,
         a parameter that cannot be an input, another set of keys than before, or a value not finite."""
-        where = f"at t = {t:.6g}, q = {np.array2string(np.asarray(q), precision=6)}"
+        where = f"at t = {t:.6g}, q = {np.array2string(np.asarray(q), precision=6, max_line_width=10**9)}"
         if not isinstance(values, Mapping):
             raise InputError(f"the controller must return a dict {{parameter name: value}}, got "
                              f"{type(values).__name__} {where}")
