@@ -254,8 +254,8 @@ def test_a_pid_carries_its_integral_from_sample_to_sample(method):
 @pytest.mark.parametrize(("old", "new", "message"), [
     ('input = "u"', 'input = "v"', "controller.input: 'v' is not a parameter of the model (parameters: m, u)"),
     ('coordinate = "x"', 'coordinate = "y"', "controller.coordinate: unknown coordinate 'y'"),
-    ('kp = {value = 8, unit = "N/m"}', 'kp = {value = 8, unit = "N/s"}', "is used as a quantity of dimension "
-     "mass*length^2/time^3 in controller.kp.unit"),
+    ('kp = {value = 8, unit = "N/m"}', 'kp = {value = 8, unit = "N/s"}',
+     "is used as a quantity of dimension mass*length^2/time^3 in controller.kp.unit"),
     ("period = 0.02", "period = -1", "controller.period: expected a positive number"),
     ('type = "pid"', 'type = "lqr"', "controller.type: expected 'state_feedback' or 'pid', got 'lqr'"),
     ("setpoint = 0.5", 'setpoint = "m"', "controller.setpoint: "),

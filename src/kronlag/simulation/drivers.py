@@ -117,6 +117,8 @@ def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
     """The shared library of ``model`` with the driver ``kind`` of :data:`DRIVERS`: the model's C
     source, the kernels, :func:`~.interface.c_declarations`, ``monitor.c``, ``progress.c``,
     ``controller.c`` and the driver's file."""
+    if isinstance(model, ControlledModel):  # a run's view of a model: the model's own libraries
+        model = model.loop.model
     libraries = _LOADED.setdefault(model, {})
     if kind not in libraries:
         spec = DRIVERS[kind]
@@ -177,7 +179,8 @@ class Segment:
 
     def without_first_row(self) -> Segment:
         """The segment without its first output (the hand-over state, already output)."""
-        return replace(self, t=self.t[1:], y=self.y[1:], derived={key: value[1:] for key, value in self.derived.items()},
+        return replace(self, t=self.t[1:], y=self.y[1:],
+                       derived={key: value[1:] for key, value in self.derived.items()},
                        parameters=None if self.parameters is None else self.parameters[1:])
 
 

@@ -17,7 +17,8 @@ import numpy as np
 
 from .trajectory import Result
 
-__all__ = ["FIELDS", "DriverOptions", "Progress", "Controller", "HANDBACK", "c_declarations", "c_declaration", "doubles"]
+__all__ = ["FIELDS", "DriverOptions", "Progress", "Controller", "HANDBACK", "c_declarations", "c_declaration",
+           "doubles"]
 
 
 #: ``progress(t)`` after accepted steps (a NULL pointer: none): 0 to go on, or the

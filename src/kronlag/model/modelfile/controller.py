@@ -137,8 +137,8 @@ def read_controller(reader: _Reader, document: dict, model: ModelFile) -> Contro
             raise reader.error("controller.states", "expected a non-empty list of coordinate or speed names")
         for i, name in enumerate(states):
             if reader.string(name, f"controller.states[{i}]") not in coordinates + speeds:
-                raise reader.error(f"controller.states[{i}]", f"{name!r} is neither a coordinate ({', '.join(coordinates)})"
-                                                              f" nor a speed ({', '.join(speeds)})")
+                raise reader.error(f"controller.states[{i}]", f"{name!r} is neither a coordinate "
+                                                              f"({', '.join(coordinates)}) nor a speed ({', '.join(speeds)})")
         for key in ("gains", "reference"):
             if key in table and (not isinstance(table[key], list) or len(table[key]) != len(states)):
                 raise reader.error(f"controller.{key}", f"expected a list of {len(states)} entries, one per state")
@@ -155,7 +155,8 @@ def read_controller(reader: _Reader, document: dict, model: ModelFile) -> Contro
             raise reader.error("controller.coordinate", f"unknown coordinate {coordinate!r}; coordinates are "
                                                         f"{', '.join(coordinates)}")
         gains = {key: _gain(reader, table.get(key, 0.0), f"controller.{key}") for key in ("kp", "ki", "kd")}
-        return PID(_input(reader, model, table), coordinate, _constant(reader, table.get("setpoint", 0), "controller.setpoint"),
+        setpoint = _constant(reader, table.get("setpoint", 0), "controller.setpoint")
+        return PID(_input(reader, model, table), coordinate, setpoint,
                    period=reader.number(table["period"], "controller.period", positive=True), **gains)
     raise reader.error("controller.type", f"expected 'state_feedback' or 'pid', got {kind!r}")
 
@@ -170,7 +171,8 @@ def check_controller_dimensions(check: DimensionCheck, model: ModelFile) -> None
     symbols.update({f"{q.name}d": speed_symbol(q) for q in model.system.coordinates})
     input_symbol = next(p for p in model.system.parameters if p.name == spec.input)
     if isinstance(spec, StateFeedback):
-        pairs = [(f"controller.gains[{i}]", gain, symbols[name]) for i, (gain, name) in enumerate(zip(spec.gains, spec.states))]
+        pairs = [(f"controller.gains[{i}]", gain, symbols[name])
+                 for i, (gain, name) in enumerate(zip(spec.gains, spec.states))]
     else:
         q = symbols[spec.coordinate]
         pairs = [("controller.kp", spec.kp, q), ("controller.ki", spec.ki, q * t), ("controller.kd", spec.kd, q / t)]

@@ -246,7 +246,8 @@ static int kl_cvode_sample(const kronlag_options *o, void *mem, N_Vector y, doub
     CVodeGetCurrentStep(mem, &h);
     kl_cvode_count(mem, counted);
     *t_sample = kl_control_next_sample(o);
-    if (CVodeReInit(mem, t, y) || (h > 0.0 && CVodeSetInitStep(mem, h)) || CVodeSetStopTime(mem, fmin(o->t1, *t_sample)))
+    if (CVodeReInit(mem, t, y) || (h > 0.0 && CVodeSetInitStep(mem, h))
+        || CVodeSetStopTime(mem, fmin(o->t1, *t_sample)))
         return KRONLAG_RESULT_SOLVER_FAILED;
     return 0;
 }
@@ -295,7 +296,8 @@ int kronlag_cvode(kronlag_options *o)
     memcpy(x, o->y0, KL_N * sizeof(double));
     if (CVodeInit(mem, kl_rhs, t0, y) || CVodeSStolerances(mem, o->rtol, o->atol) || CVodeSetUserData(mem, &data)
         || CVodeSetLinearSolver(mem, LS, J) || (o->max_order > 0 && CVodeSetMaxOrd(mem, o->max_order))
-        || CVodeSetMaxNumSteps(mem, o->max_steps) || CVodeSetStopTime(mem, fmin(t1, t_sample)) || CVodeSetMaxHnilWarns(mem, -1))
+        || CVodeSetMaxNumSteps(mem, o->max_steps) || CVodeSetStopTime(mem, fmin(t1, t_sample))
+        || CVodeSetMaxHnilWarns(mem, -1))
         goto done;
     flag = KRONLAG_RESULT_SUCCESS;
     if (n_eval == 0) {
