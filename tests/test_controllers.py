@@ -356,3 +356,19 @@ def test_a_sweep_runs_every_case_under_the_controller():
                            controller=feedback(GAINS), outcomes={"angle": lambda run: run.q[-1, 5] - UPRIGHT})
     assert list(result.table["status"]) == ["ok"] * 3
     assert np.all(np.abs(result.table["angle"]) < 0.01)  # balanced in every case
+
+
+def test_a_model_file_with_a_controller_writes_and_reads_back():
+    from kronlag.model.modelfile import to_toml
+
+    for file in (kronlag.load_model(CART_POLE_FILE), loads_model(MASS_ON_A_LINE)):
+        again = loads_model(to_toml(file))
+        assert type(again.controller) is type(file.controller)
+        for name in ("input", "states", "reference", "period", "coordinate", "setpoint"):
+            assert getattr(again.controller, name, None) == getattr(file.controller, name, None)
+        gains = (file.controller.gains if hasattr(file.controller, "gains")
+                 else (file.controller.kp, file.controller.ki, file.controller.kd))
+        again_gains = (again.controller.gains if hasattr(again.controller, "gains")
+                       else (again.controller.kp, again.controller.ki, again.controller.kd))
+        assert [gain.value for gain in again_gains] == [gain.value for gain in gains]
+        assert [gain.dimension for gain in again_gains] == [gain.dimension for gain in gains]

@@ -48,7 +48,8 @@ if TYPE_CHECKING:
     from .model_file import ModelFile
     from .reader import _Reader
 
-__all__ = ["StateFeedback", "PID", "ControllerSpec", "read_controller", "check_controller_dimensions"]
+__all__ = ["StateFeedback", "PID", "ControllerSpec", "read_controller", "write_controller",
+           "check_controller_dimensions"]
 
 
 @dataclass(frozen=True)
@@ -159,6 +160,20 @@ def read_controller(reader: _Reader, document: dict, model: ModelFile) -> Contro
         return PID(_input(reader, model, table), coordinate, setpoint,
                    period=reader.number(table["period"], "controller.period", positive=True), **gains)
     raise reader.error("controller.type", f"expected 'state_feedback' or 'pid', got {kind!r}")
+
+
+def write_controller(spec: ControllerSpec) -> dict:
+    """The ``[controller]`` table of ``spec`` (gains with a unit written in SI, so that they read back exactly)."""
+
+    def gain(value: Gain) -> float | dict:
+        return value.value if value.unit is None else {"value": value.value, "unit": si_unit(value.unit)[1]}
+
+    if isinstance(spec, PID):
+        return {"type": "pid", "input": spec.input, "coordinate": spec.coordinate, "setpoint": spec.setpoint,
+                "kp": gain(spec.kp), "ki": gain(spec.ki), "kd": gain(spec.kd), "period": spec.period}
+    return {"type": "state_feedback", "input": spec.input, "states": list(spec.states),
+            "gains": [gain(value) for value in spec.gains], "reference": list(spec.reference),
+            **({} if spec.period is None else {"period": spec.period})}
 
 
 def check_controller_dimensions(check: DimensionCheck, model: ModelFile) -> None:
