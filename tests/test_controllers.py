@@ -372,3 +372,15 @@ def test_a_model_file_with_a_controller_writes_and_reads_back():
                        else (again.controller.kp, again.controller.ki, again.controller.kd))
         assert [gain.value for gain in again_gains] == [gain.value for gain in gains]
         assert [gain.dimension for gain in again_gains] == [gain.dimension for gain in gains]
+
+
+def test_the_command_line_sweep_runs_the_file_controller(tmp_path, capsys):
+    """The grid's cases balance the pole (final angle near upright): the file's [controller] is in the loop."""
+    output = tmp_path / "cases.csv"
+    assert main(["sweep", str(CART_POLE_FILE), "--grid", "m=0.1,0.3", "--t-end", "4", "--points", "11",
+                 "--workers", "0", "--output", str(output)]) == 0
+    import pandas
+
+    table = pandas.read_csv(output)
+    assert list(table["status"]) == ["ok", "ok"]
+    assert np.all(np.abs(table["theta_pole_final"] - UPRIGHT) < 0.01)
