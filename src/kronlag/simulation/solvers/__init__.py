@@ -31,6 +31,6 @@ AUTO_PREFERENCE = (SwitchingSolver.name, CompiledSolver.name, ProjectionSolver.n
 
 #: What ``method="auto"`` picks under a :class:`~kronlag.simulation.controllers.Sampled` controller: a
 #: one-step method first, since the integrator restarts at every sample and CVODE (multistep) restarts at
-#: order 1 with its smallest steps (cart-pole at 1 kHz, rtol 1e-8: 9 CVODE steps and 62 evaluations per
+#: order 1 with its smallest steps (cart-pole at 1 kHz, rtol 1e-8: 8 CVODE steps and 29 evaluations per
 #: sample against 1.3 ALI3-P steps; bench/bench_controllers.py).
 SAMPLED_PREFERENCE = (Index3Solver.name, CompiledSolver.name, ProjectionSolver.name)
