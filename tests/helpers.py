@@ -3,7 +3,7 @@
 - the built-in models, derived once per session, and comparison of symbolic matrices, exactly
   or at random numeric points;
 - numeric models of the built-in models with random parameter values, on either backend;
-- the paper's four-bar and quick-return written as bodies + joints;
+- the paper's four-bar and quick-return, and a cart-pole, written as bodies + joints;
 - a planar mechanism with redundant constraints (a parallelogram with a third crank);
 - trajectories built from closed-form kinematics, for testing graphics without
   :func:`kronlag.simulate` (kinematically exact, the constraints hold to rounding, but not
@@ -178,6 +178,22 @@ def quick_return_by_joints():
     system.add_joint("revolute", "link", "G", at_a=(l_EF / 2, 0))
     system.add_joint("pin_in_slot", "ground", "G", at_a=(0, l_AH), axis=(1, 0))
     system.add_torque("crank", tau, name="drive")
+    return system
+
+
+#: The cart-pole of examples/cart_pole.toml: cart M, pole m with its centre of mass lc from the pivot.
+CART_POLE_VALUES = dict(M=1.0, m=0.2, lc=0.3, I=0.2 * 0.6 ** 2 / 12, Ic=0.1, g=9.81, u=0.0)
+
+
+def cart_pole_by_joints():
+    """The cart-pole of ``examples/cart_pole.toml`` in Python: a cart on a prismatic joint along x, a
+    pole on a revolute joint at the cart's centre (``theta_pole`` = pi/2 upright), a force ``u`` on the cart."""
+    M, m, lc, I, Ic, g, u = sp.symbols("M m lc I Ic g u")
+    system = mechanism([free_body("cart", mass=M, inertia=Ic), free_body("pole", mass=m, inertia=I)],
+                       parameters=[M, m, lc, I, Ic, g, u], gravity=(0, -g), name="cart_pole")
+    system.add_joint("prismatic", "ground", "cart", axis=(1, 0), name="rail")
+    system.add_joint("revolute", "cart", "pole", at_b=(-lc, 0), name="hinge")
+    system.add_force(system.body("cart").position, (u, 0), name="push")
     return system
 
 

@@ -48,12 +48,13 @@ from .model.system import System  # noqa: E402
 from .numeric.numeric_model import NumericModel  # noqa: E402
 from .numeric.reactions import Reaction  # noqa: E402
 from .numeric.results import ForwardDynamicsBatch, ForwardDynamicsResult, InverseDynamicsResult  # noqa: E402
+from .simulation.controllers import Sampled  # noqa: E402
 from .simulation.problem import Solver  # noqa: E402
 from .simulation.simulate import simulate  # noqa: E402
 from .simulation.trajectory import LimitEvent, Result, SingularPassage, Trajectory  # noqa: E402
 from .studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis  # noqa: E402
 from .studies.equilibrium import Equilibrium  # noqa: E402
-from .studies.linearization import LinearModel  # noqa: E402
+from .studies.linearization import LinearModel, linearize  # noqa: E402
 from .studies.sweeps import SweepResult, sweep  # noqa: E402
 from .symbolic.derivation import derive  # noqa: E402
 from .symbolic.equations import Equations  # noqa: E402
@@ -99,12 +100,14 @@ __all__ = [
     "inverse_dynamics",
     "InverseDynamicsRun",
     "simulate",
+    "Sampled",
     "Solver",
     "Trajectory",
     "SingularPassage",
     "Result",
     "Equilibrium",
     "LinearModel",
+    "linearize",
     "sweep",
     "SweepResult",
     "KronlagError",

@@ -17,6 +17,7 @@ from ..model.builtin import resolve_model
 from ..model.modelfile import ModelFile
 from ..numeric.reactions import column_unit, multiplier_labels, reaction_columns
 from ..numeric.tolerances import ZERO_EIGENVALUE_RTOL
+from ..simulation.controllers import file_controller
 from ..studies.linearization import LinearModel
 from ..studies.sweeps import SweepInterrupted, SweepResult, sweep
 from .commands import method_help, output_times
@@ -180,7 +181,8 @@ def _sweep(arguments: argparse.Namespace) -> None:
     numeric = numeric_model(model).with_parameters(settings)
     t_end = arguments.t_end if arguments.t_end is not None else model.simulation.t_end
     options = {"method": arguments.method or model.simulation.method, "rtol": model.simulation.rtol,
-               "atol": model.simulation.atol, "t_eval": output_times(t_end, points=arguments.points)}
+               "atol": model.simulation.atol, "t_eval": output_times(t_end, points=arguments.points),
+               "controller": None if model.controller is None else file_controller(model.controller, numeric)}
     labels = _column_labels(model, list(grid))
     # the rows as they finish: in the output itself (CSV), else next to it until the table is written
     rows = output if output is None or output.suffix == ".csv" else output.with_name(output.name + ".partial.csv")

@@ -25,6 +25,7 @@ from ..model.modelfile.units import si_unit
 from ..model.symbols import t
 from ..model.system import drive_name
 from ..numeric.tolerances import matrix_rank
+from ..simulation.controllers import file_controller
 from ..simulation.simulate import simulate
 from ..simulation.trajectory import LimitEvent
 from ..studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
@@ -207,9 +208,10 @@ def simulate_model(model: ModelFile, *, t_end: float | None = None, method: str 
     q0, qd0 = initial_state(model, numeric)
     settings = model.simulation
     limits = {} if max_steps is None else {"max_steps": max_steps}
+    controller = None if model.controller is None else file_controller(model.controller, numeric)
     return simulate(numeric, (0.0, settings.t_end if t_end is None else t_end), q0, qd0,
                     method=method or settings.method, rtol=rtol or settings.rtol, atol=atol or settings.atol,
-                    t_eval=t_eval, progress=progress, **limits)
+                    t_eval=t_eval, progress=progress, controller=controller, **limits)
 
 
 _TRIGONOMETRIC = (sp.sin, sp.cos, sp.tan)

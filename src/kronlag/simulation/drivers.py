@@ -23,6 +23,7 @@ from ..core.errors import CompilerError, InputError
 from ..numeric import codegen
 from ..numeric.numeric_model import NOT_FINITE
 from ..numeric.tolerances import numerical_rank
+from .controllers import ControlledModel
 from .interface import DriverOptions, GapFunction, c_declarations, doubles
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
 from .stepping import SUCCESS, approach_text, stopped_text
@@ -115,8 +116,10 @@ _LOADED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
     """The shared library of ``model`` with the driver ``kind`` of :data:`DRIVERS`: the model's C
-    source, the kernels, :func:`~.interface.c_declarations`, ``monitor.c``, ``progress.c`` and the
-    driver's file."""
+    source, the kernels, :func:`~.interface.c_declarations`, ``monitor.c``, ``progress.c``,
+    ``controller.c`` and the driver's file."""
+    if isinstance(model, ControlledModel):  # a run's view of a model: the model's own libraries
+        model = model.loop.model
     libraries = _LOADED.setdefault(model, {})
     if kind not in libraries:
         spec = DRIVERS[kind]
@@ -124,7 +127,7 @@ def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
             _load_sundials()
         library = _driver_library(model.c_source + model.c_kernels(*spec.kernels) + c_declarations()
                                   + _c_file("monitor.c") + _c_file("progress.c") + _c_file("limits.c")
-                                  + _c_file(spec.file))
+                                  + _c_file("controller.c") + _c_file(spec.file))
         function = getattr(library, spec.entry)
         function.argtypes, function.restype = [ctypes.POINTER(DriverOptions)], ctypes.c_int
         if spec.flag_names:
@@ -169,6 +172,8 @@ class Segment:
     orders: tuple[int, int] = (0, 0)
     #: Limits: the watched functions that fell through zero (``flag`` :attr:`Result.LIMIT`).
     triggered: tuple[int, ...] = ()
+    #: Under a controller, the parameters at the outputs (N, P) (:attr:`Solution.parameters`).
+    parameters: np.ndarray | None = None
 
     @property
     def hands_over(self) -> bool:
@@ -177,7 +182,9 @@ class Segment:
 
     def without_first_row(self) -> Segment:
         """The segment without its first output (the hand-over state, already output)."""
-        return replace(self, t=self.t[1:], y=self.y[1:], derived={key: value[1:] for key, value in self.derived.items()})
+        return replace(self, t=self.t[1:], y=self.y[1:],
+                       derived={key: value[1:] for key, value in self.derived.items()},
+                       parameters=None if self.parameters is None else self.parameters[1:])
 
 
 def output_rows(problem: MultibodyProblem, t0: float, options: SolverOptions) -> tuple[np.ndarray, int]:
@@ -189,15 +196,16 @@ def output_rows(problem: MultibodyProblem, t0: float, options: SolverOptions) ->
     return times, len(times)
 
 
-def _buffers(model: NumericModel, rows: int, watched: int) -> dict[str, np.ndarray]:
+def _buffers(model: NumericModel, rows: int, watched: int, controlled: bool) -> dict[str, np.ndarray]:
     """The output buffers of :class:`~.interface.DriverOptions` by field name: ``t_out`` (rows,),
     ``y_out`` (rows, 2 m), the derived quantities of :class:`Solution` (rows, ...), ``events``,
-    ``y_end`` and the limits' ``roots`` (``watched`` functions); C-contiguous parts of one block (one
-    allocation: with outputs at every step, ``rows`` is large and the driver touches only the rows it
-    writes)."""
+    ``y_end``, the limits' ``roots`` (``watched`` functions) and ``p_out`` (rows, P) under a
+    controller; C-contiguous parts of one block (one allocation: with outputs at every step, ``rows``
+    is large and the driver touches only the rows it writes)."""
     m, r, s = model.m, model.r, model.s
     shapes = {"t_out": (rows,), "y_out": (rows, 2 * m), **derived_shapes(rows, m, r, s),
-              "events": (_MAX_EVENTS, 5 + m), "y_end": (2 * m,), "roots": (max(watched, 1),)}
+              "events": (_MAX_EVENTS, 5 + m), "y_end": (2 * m,), "roots": (max(watched, 1),),
+              "p_out": (rows if controlled else 0, len(model.parameter_names))}
     ends = list(accumulate((math.prod(shape) for shape in shapes.values()), initial=0))
     block = np.empty(ends[-1])
     return {name: block[start:end].reshape(shape) for (name, shape), start, end in zip(shapes.items(), ends, ends[1:])}
@@ -215,7 +223,8 @@ def run(kind: str, problem: MultibodyProblem, options: SolverOptions, t0: float,
     library = driver(model, kind)
     times, rows = output_rows(problem, t0, options)
     watch = problem.watch
-    buffers = _buffers(model, rows, watch.size if watch else 0)
+    loop = model.loop if isinstance(model, ControlledModel) else None
+    buffers = _buffers(model, rows, watch.size if watch else 0, loop is not None)
     p = model.parameter_vector(t0)
     arrays = {"p": p, "y0": y0, "t_eval": times}
     arrays |= {name: value for name, value in inputs.items() if isinstance(value, np.ndarray)}
@@ -233,6 +242,10 @@ def run(kind: str, problem: MultibodyProblem, options: SolverOptions, t0: float,
             fields["h0"] = watch.first_step
         arrays |= {"gap_parameters": p, "gap_watched": watch.watched.astype(float),
                    "contact_rows": np.array(watch.contact_rows, dtype=float)}
+    if loop is not None:  # the controller's buffers are the loop's own (it reads and writes them)
+        control = loop.driver_fields(rows)
+        arrays |= {name: control.pop(name) for name in ("p_control", "control_buffer")}
+        fields |= control
     arguments = DriverOptions(**fields, **{name: doubles(array) for name, array in (arrays | buffers).items()})
     flag = getattr(library, DRIVERS[kind].entry)(ctypes.byref(arguments))
     n = arguments.n_out
@@ -241,7 +254,8 @@ def run(kind: str, problem: MultibodyProblem, options: SolverOptions, t0: float,
     return Segment(t=outputs.pop("t_out"), y=outputs.pop("y_out"), derived=outputs, events=passages, flag=flag,
                    t_end=arguments.t_end, y_end=buffers["y_end"].copy(), steps=arguments.steps, nfev=arguments.nfev,
                    njev=arguments.njev, orders=(arguments.lowest_order, arguments.highest_order),
-                   triggered=tuple(np.flatnonzero(buffers["roots"][:watch.size]).tolist()) if watch else ())
+                   triggered=tuple(np.flatnonzero(buffers["roots"][:watch.size]).tolist()) if watch else (),
+                   parameters=buffers["p_out"][:n].copy() if loop is not None else None)
 
 
 def segment_status(segment: Segment, model: NumericModel, kind: str) -> tuple[Result, str]:
@@ -273,7 +287,9 @@ def solution_of(segments: Sequence[Segment], result: Result, message: str) -> So
                     nfev=sum(segment.nfev for segment in segments), njev=sum(segment.njev for segment in segments),
                     steps=sum(segment.steps for segment in segments), derived=derived,
                     events=tuple(event for segment in segments for event in segment.events),
-                    stop=_limit_stop(segments[-1]))
+                    stop=_limit_stop(segments[-1]),
+                    parameters=None if segments[0].parameters is None
+                    else np.concatenate([segment.parameters for segment in segments]))
 
 
 def _limit_stop(segment: Segment) -> LimitStop | None:

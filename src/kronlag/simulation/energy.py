@@ -29,7 +29,7 @@ def _power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:
     return float(qd @ forces)
 
 
-def nonconservative_work(model, t, q, qd, qdd) -> np.ndarray:
+def nonconservative_work(model, t, q, qd, qdd, *, inputs=None) -> np.ndarray:
     """``W(t_k) = integral_{t_0}^{t_k} P dt`` along a sampled motion, shape (N,).
 
     The power ``P = qd^T f_Q``, plus that of the constraint forces
@@ -43,16 +43,47 @@ def nonconservative_work(model, t, q, qd, qdd) -> np.ndarray:
     model : NumericModel
     t : (N,)
     q, qd, qdd : (N, m)
+    inputs : dict of str to (N,), optional
+        Parameter values at the samples set by a controller (``Trajectory.inputs``): the power at
+        sample ``k`` uses them (held over the central difference; a sampled controller's jumps
+        between samples are not resolved).
     """
     t = np.asarray(t, dtype=float)
     if len(t) == 0:
         return np.zeros(0)
+    if inputs:
+        power, rate = _controlled_power(model, t, q, qd, qdd, inputs)
+        return _integrated(t, power, rate)
     power = np.array([_power(model, *state) for state in zip(t, q, qd)])
     scale = np.max(np.diff(t)) if len(t) > 1 else 1.0
     step = 1e-6 * scale
     rate = np.array([(_power(model, time + step, x + step * v, v + step * a)
                       - _power(model, time - step, x - step * v, v - step * a)) / (2 * step)
                      for time, x, v, a in zip(t, q, qd, qdd)])
+    return _integrated(t, power, rate)
+
+
+def _integrated(t: np.ndarray, power: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """The cubic Hermite rule over the samples, from 0 at ``t[0]``."""
     h = np.diff(t)
     increments = h / 2 * (power[:-1] + power[1:]) + h ** 2 / 12 * (rate[:-1] - rate[1:])
     return np.concatenate([[0.0], np.cumsum(increments)])
+
+
+def _controlled_power(model, t, q, qd, qdd, inputs) -> tuple[np.ndarray, np.ndarray]:
+    """The power and its rate (:func:`nonconservative_work`) with the parameters of each sample."""
+    names = list(model.parameter_names)
+    index = [names.index(name) for name in inputs]
+    values = np.column_stack([inputs[name] for name in inputs])
+    base = model.parameter_vector()
+    power, rate = np.empty(len(t)), np.empty(len(t))
+    scale = np.max(np.diff(t)) if len(t) > 1 else 1.0
+    step = 1e-6 * scale
+    for k, (time, x, v, a) in enumerate(zip(t, q, qd, qdd)):
+        parameters = base.copy()
+        parameters[index] = values[k]
+        held = model.with_parameters(dict(zip(names, parameters)))
+        power[k] = _power(held, time, x, v)
+        rate[k] = (_power(held, time + step, x + step * v, v + step * a)
+                   - _power(held, time - step, x - step * v, v - step * a)) / (2 * step)
+    return power, rate

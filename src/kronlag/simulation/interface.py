@@ -17,13 +17,17 @@ import numpy as np
 
 from .trajectory import Result
 
-__all__ = ["FIELDS", "DriverOptions", "Progress", "GapFunction", "HANDBACK", "c_declarations", "c_declaration",
-           "doubles"]
+__all__ = ["FIELDS", "DriverOptions", "Progress", "GapFunction", "Controller", "HANDBACK", "c_declarations",
+           "c_declaration", "doubles"]
 
 
 #: ``progress(t)`` after accepted steps (a NULL pointer: none): 0 to go on, or the
 #: ``KRONLAG_RESULT_<NAME>`` code to end the run with (``INTERRUPTED``: Ctrl-C; ``RAISED``).
 Progress = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_double)
+
+#: ``controller(t)`` of a controlled run (:mod:`.controllers`), after the driver wrote ``[q, qd]`` to
+#: ``control_buffer``: the controller writes ``p_control``; returns 0, or the code to end the run with.
+Controller = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_double)
 
 #: A segment that ends because the motion is clear of a singular configuration, for the switching
 #: method to continue with the fast method (positive like :attr:`Result.APPROACH`, the hand-over the
@@ -91,6 +95,12 @@ FIELDS: tuple[tuple[str, type, str, str], ...] = (
     ("n_contacts", _I, "in", "contact constraints whose force -lam is watched"),
     ("contact_rows", _DOUBLES, "in", "their rows of lam (n_contacts)"),
     ("roots", _DOUBLES, "out", "1 for each watched function that fell through zero (n_gaps + n_contacts)"),
+    # a controller in the loop (simulation/controllers.py, c/controller.c)
+    ("controller", Controller, "in", "called with t after [q, qd] were written to control_buffer (NULL: none)"),
+    ("control_mode", _I, "in", "0: no controller; 1: called at every evaluation; 2: at the sample instants"),
+    ("p_control", _DOUBLES, "out", "the parameters the kernels read under a controller (n_parameters)"),
+    ("control_buffer", _DOUBLES, "out", "[q, qd] for the controller, then the next sample instant (2 m + 1)"),
+    ("p_out", _DOUBLES, "out", "the parameters at each output under a controller (rows x n_parameters)"),
 )
 
 

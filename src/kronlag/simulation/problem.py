@@ -125,6 +125,9 @@ class Solution:
         Singular configurations passed.
     stop : LimitStop or None
         Limits: where a run with a ``problem.watch`` ended at an event (``result`` :attr:`Result.LIMIT`).
+    parameters : (N, P) or None
+        Under a controller (:mod:`.controllers`), the parameter values at the outputs, when the
+        solver recorded them (else :func:`simulate` does).
     """
 
     t: np.ndarray
@@ -137,6 +140,7 @@ class Solution:
     derived: dict[str, np.ndarray] | None = None
     events: tuple[SingularPassage, ...] = ()
     stop: LimitStop | None = None
+    parameters: np.ndarray | None = None
 
     #: The keys of :attr:`derived` (:func:`derived_shapes`).
     DERIVED: ClassVar[tuple[str, ...]] = tuple(derived_shapes(0, 0, 0, 0))
@@ -207,6 +211,9 @@ class Solver(ABC):
     requirements: ClassVar[str] = "nothing"
     #: Default Baumgarte ``alpha`` and ``beta`` of the index-1 ODE it integrates (0: none).
     stabilization: ClassVar[float] = 0.0
+    #: It stops at the sample instants of a :class:`~kronlag.simulation.controllers.Sampled` controller
+    #: itself (a compiled driver); else :func:`simulate` runs it from one sample instant to the next.
+    samples_inside: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)

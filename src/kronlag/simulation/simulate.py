@@ -18,9 +18,10 @@ from ..core.errors import AssemblyError, InitialStateWarning, InputError, Singul
 from ..core.limits import MAX_OUTPUT_POINTS
 from ..numeric.linalg import velocity_constraints
 from .control import RunControl
+from .controllers import ControlledModel, ControlLoop, Sampled, controlled, solve_sampled
 from .impacts import has_limits, solve_with_limits
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
-from .solvers import AUTO_PREFERENCE, METHODS
+from .solvers import AUTO_PREFERENCE, METHODS, SAMPLED_PREFERENCE
 from .trajectory import Trajectory
 
 if TYPE_CHECKING:
@@ -42,13 +43,19 @@ def _output_times(t_eval: Sequence[float] | np.ndarray | None, t0: float, t1: fl
     return times
 
 
-def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray) -> dict[str, np.ndarray]:
+def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray,
+             parameters: np.ndarray | None = None) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
     """The :attr:`Solution.derived` arrays at ``states`` (N, 2 m), by the model's Python interface
-    (NaN accelerations and multipliers where the configuration is singular)."""
+    (NaN accelerations and multipliers where the configuration is singular), and under a controller
+    the parameters at the outputs (given held ones, ``parameters``; else those the controller sets)."""
     m = model.m
     derived = {name: np.full(shape, np.nan) for name, shape in derived_shapes(len(times), *model.shape).items()}
+    loop = model.loop if isinstance(model, ControlledModel) else None
+    recorded = None if loop is None else np.empty((len(times), len(model.parameter_names)))
     for k, (t, y) in enumerate(zip(times, states)):
         q, qd = y[:m], y[m:]
+        if loop is not None and parameters is not None:
+            loop.p[:] = parameters[k]
         with suppress(SingularConfigurationError):  # the state a failed integration ended in
             result = model.forward_dynamics(q, qd, t)
             derived["qdd"][k], derived["lam"][k], derived["mu"][k] = result.qdd, result.lam, result.mu
@@ -58,24 +65,31 @@ def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray) -> dict
         derived["position_residual"][k] = terms["Phi"]
         B, c = velocity_constraints(terms)
         derived["velocity_residual"][k] = B @ qd + c
-    return derived
+        if recorded is not None:
+            recorded[k] = loop.p
+    return derived, recorded
 
 
-def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, started: float) -> Trajectory:
-    """The :class:`Trajectory` of ``solution``, with the derived quantities at its output times."""
-    model, m = problem.model, problem.m
-    derived = solution.derived if solution.derived is not None else _derived(model, solution.t, solution.y)
+def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, started: float,
+                model: NumericModel, loop: ControlLoop | None) -> Trajectory:
+    """The :class:`Trajectory` of ``solution`` (of ``model``, under ``loop``'s controller if any), with the
+    derived quantities at its output times."""
+    m, derived, parameters = problem.m, solution.derived, solution.parameters
+    if derived is None:
+        derived, parameters = _derived(problem.model, solution.t, solution.y, parameters)
     return Trajectory(t=solution.t, q=solution.y[:, :m], qd=solution.y[:, m:], **derived,
                       coordinate_names=tuple(model.coordinate_names), model=model,
                       method=method, message=solution.message, nfev=solution.nfev,
                       njev=solution.njev, steps=solution.steps, wall_time=time.perf_counter() - started,
-                      events=solution.events, result=solution.result)
+                      events=solution.events, result=solution.result,
+                      inputs=loop.inputs(parameters) if loop is not None else {})
 
 
 def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, method: str | type[Solver] = "auto",
              rtol: float = 1e-8, atol: float = 1e-10, t_eval=None, alpha: float | None = None,
              beta: float | None = None, max_step: float | None = None, max_steps: int | None = None,
-             progress: Callable[[float], object] | None = None) -> Trajectory:
+             progress: Callable[[float], object] | None = None,
+             controller: Callable | Sampled | None = None) -> Trajectory:
     r"""Integrate the equations of motion of ``model`` over ``t_span``.
 
     The model is the differential-algebraic system (Van Khang 2011, Eq. 23)::
@@ -124,7 +138,10 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
             C backend and no time-varying parameter);
         ``'auto'``
             the first of :data:`AUTO_PREFERENCE` (``'switching'``,
-            ``'compiled'``, ``'projection'``) that the model allows.
+            ``'compiled'``, ``'projection'``) that the model allows; under a
+            :class:`~kronlag.Sampled` controller the first of :data:`SAMPLED_PREFERENCE`
+            (``'ali3p'``, ``'compiled'``, ``'projection'``): a one-step method restarts at
+            the samples without cost.
 
         The index-1 methods stop with status -1 at the approach to a singular
         configuration, where they cannot tell the branches of the motion apart.
@@ -145,6 +162,15 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
     progress : callable, optional
         Called as ``progress(t)`` after every accepted step.  An exception it raises ends the
         run like one raised by a time-varying parameter (see Raises).
+    controller : callable or Sampled, optional
+        Inputs set from the state while the integrator runs (``docs/control.md``):
+        ``controller(t, q, qd) -> {parameter name: value}``, called by every method at every
+        evaluation of the equations of motion (right-hand side, Newton iteration, output), or
+        :class:`~kronlag.Sampled` ``(f, period=..., state=...)``, a digital controller whose
+        inputs are held between its samples (every method restarts exactly at the sample
+        instants).  The keys must be parameters of the model entering only the forces, the same
+        at every call, the values finite (:class:`InputError` naming the key, or ``t`` and ``q``).
+        The values used are in ``trajectory.inputs``.  Not with time-varying parameters.
 
     Returns
     -------
@@ -165,7 +191,7 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         default handler and ``simulate`` runs on the main thread (else the signal is left to the
         program's own handler); a second Ctrl-C raises at once, without the trajectory.
     Exception
-        An exception raised by a time-varying parameter's function or by ``progress`` ends the run
+        An exception raised by the controller, a time-varying parameter's function or ``progress`` ends the run
         at the last accepted step and propagates with the partial trajectory as its attribute
         ``trajectory`` (``result`` :attr:`Result.RAISED`, the exception in ``message``).
 
@@ -189,7 +215,7 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         max_steps = span_steps
     if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 1):
         raise InputError(f"max_steps must be an integer >= 1, got {max_steps!r}")
-    solver = _resolve_method(method, model)
+    solver = _resolve_method(method, model, sampled=isinstance(controller, Sampled))
     default_stabilization = solver.stabilization
     control = RunControl()
     options = SolverOptions(rtol=rtol, atol=atol, max_step=np.inf if max_step is None else float(max_step),
@@ -206,15 +232,25 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         if bad:
             raise InputError(f"{label} is not finite for {', '.join(bad)}")
     problem = replace(start, **dict(zip(("q0", "qd0"), _consistent_start(start, options))))
+    loop = None
+    if controller is not None:  # its first call, at the start, checks what it returns
+        loop = ControlLoop(controller, model, control, t0)
+        loop.start(t0, problem.y0)
+        problem = controlled(problem, loop)
     with control.catching_sigint():
         if has_limits(model):  # limits: segments between the impacts and contact changes
-            solution = solve_with_limits(solver(options), problem, _derived)
+            if loop is not None:
+                raise InputError("a controller and limits in one run are not supported yet: "
+                                 "write the feedback symbolically (docs/control.md)")
+            solution = solve_with_limits(solver(options), problem, lambda *state: _derived(*state)[0])
+        elif loop is not None and loop.sampled and not solver.samples_inside:
+            solution = solve_sampled(solver(options), problem, loop)
         else:
             solution = solver(options).solve(problem)
         if control.error is not None:
             error = control.error
             solution = replace(solution, message=f"{solution.message}: {type(error).__name__}: {error}")
-        trajectory = _trajectory(solution, problem, solver.name, started)
+        trajectory = _trajectory(solution, problem, solver.name, started, model, loop)
     control.raise_if_stopped(trajectory)
     return trajectory
 
@@ -251,15 +287,17 @@ def _consistent_start(problem: MultibodyProblem, options: SolverOptions) -> tupl
     return y0[:m], y0[m:]
 
 
-def _resolve_method(method: str | type[Solver], model: NumericModel) -> type[Solver]:
-    """The solver class ``method`` names (``"auto"``: the first of :data:`AUTO_PREFERENCE` that
-    supports ``model``), or ``method`` itself if it is a concrete :class:`Solver` subclass."""
+def _resolve_method(method: str | type[Solver], model: NumericModel, *, sampled: bool = False) -> type[Solver]:
+    """The solver class ``method`` names (``"auto"``: the first of :data:`AUTO_PREFERENCE`, or of
+    :data:`SAMPLED_PREFERENCE` under a sampled controller, that supports ``model``), or ``method``
+    itself if it is a concrete :class:`Solver` subclass."""
     if isinstance(method, type) and issubclass(method, Solver):
         if inspect.isabstract(method) or not isinstance(getattr(method, "name", None), str):
             raise InputError(f"method={method.__name__} is not a complete Solver: it must define name and solve()")
         return method
     if isinstance(method, str) and method == "auto":
-        return next(METHODS[name] for name in AUTO_PREFERENCE if METHODS[name].supports(model))
+        preference = SAMPLED_PREFERENCE if sampled else AUTO_PREFERENCE
+        return next(METHODS[name] for name in preference if METHODS[name].supports(model))
     if isinstance(method, str) and method in METHODS:
         return METHODS[method]
     raise InputError(f"unknown method {method!r}; choose from 'auto', {', '.join(map(repr, METHODS))} "

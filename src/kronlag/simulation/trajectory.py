@@ -14,7 +14,7 @@ import csv
 import enum
 import io
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from os import PathLike
 from typing import TYPE_CHECKING, Any
@@ -61,7 +61,7 @@ class Result(enum.Enum):
     PROJECTION_FAILED = -1002, "the projection onto the constraints failed"
     OUTPUTS_FULL = -1006, "more steps than output rows: pass t_eval to choose the outputs"
     INTERRUPTED = -1007, "interrupted (Ctrl-C, SIGINT)"
-    RAISED = -1008, "a callback (a time-varying parameter or progress) raised an exception"
+    RAISED = -1008, "a callback (a controller, a time-varying parameter or progress) raised an exception"
     SOLVER_FAILED = -1000, "the integrator failed"
     #: A segment that ends at a limit's event (a gap or a contact force through zero): the run goes
     #: on after the impact or the change of contact (:mod:`kronlag.simulation.impacts`); never a
@@ -244,6 +244,9 @@ class Trajectory(ColumnExport):
     result : Result
         How the integration ended; :attr:`status` (0 success, -1 failure: the arrays then hold
         the solution up to the failure) and :attr:`success` follow from it.
+    inputs : dict of str to (N,)
+        Under ``simulate(controller=...)``, the values the controller set, by parameter name, at
+        the outputs (held values between samples of a ``Sampled`` one); else empty.
 
     Notes
     -----
@@ -281,6 +284,7 @@ class Trajectory(ColumnExport):
     events: tuple[SingularPassage | LimitEvent, ...] = ()
     result: Result = Result.SUCCESS
     limit_forces: np.ndarray | None = None
+    inputs: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def status(self) -> int:
@@ -301,7 +305,7 @@ class Trajectory(ColumnExport):
     def nonconservative_work(self) -> np.ndarray:
         """``W(t) = integral qd^T (f_Q - Phi_q^T lambda - A^T mu) dt`` from ``t[0]``: the work of applied
         forces and torques, dampers, generalized forces and drives, shape (N,); see :mod:`kronlag.simulation.energy`."""
-        return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd)
+        return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd, inputs=self.inputs)
 
     @property
     def energy_balance(self) -> np.ndarray:

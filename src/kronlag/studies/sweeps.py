@@ -30,6 +30,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..numeric.numeric_model import NumericModel
 from ..simulation.labelled import LabelledArrays, rate_unit
+from ..simulation.controllers import Sampled
 from ..simulation.simulate import simulate
 
 if TYPE_CHECKING:
@@ -315,7 +316,8 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
           client=None, workers: int = 2, fixed: Iterable[str] = (), qd_fixed: Iterable[str] = (),
           assemble: bool = True, keep_trajectories: bool = False, batch_size: int | None = None,
           retries: int = 3, progress: bool | Callable[[int, int], None] = True,
-          on_row: Callable[[dict], None] | None = None, **simulate_options) -> SweepResult:
+          on_row: Callable[[dict], None] | None = None, controller: Callable | Sampled | None = None,
+          **simulate_options) -> SweepResult:
     """Simulate every case of a grid or sample of parameter values and initial states.
 
     Parameters
@@ -356,6 +358,9 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
     on_row : callable ``f(row: dict)``, optional
         Called in this process with each row of the table as its case finishes (in the
         order they finish), e.g. to append it to a file.
+    controller : callable or Sampled, optional
+        The controller in the loop of every case (:func:`kronlag.simulate`'s ``controller``;
+        pickled with cloudpickle, each case starts from its initial ``state``).
     **simulate_options
         Passed to :func:`kronlag.simulate` (``method``, ``rtol``, ``atol``, ``t_eval``, ...).
 
@@ -377,7 +382,7 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
     _check_names(model_or_factory, cases)
     settings = {"t_span": tuple(t_span), "initial_states": initial_states, "fixed": set(fixed),
                 "qd_fixed": set(qd_fixed), "assemble": assemble, "outcomes": dict(outcomes or DEFAULT_OUTCOMES),
-                "keep_trajectories": keep_trajectories, "simulate": simulate_options}
+                "keep_trajectories": keep_trajectories, "simulate": {**simulate_options, "controller": controller}}
     report = progress if callable(progress) else _TextProgress(len(cases)) if progress else (lambda done, total: None)
     results: dict[int, tuple[dict, Trajectory | None]] = {}
 

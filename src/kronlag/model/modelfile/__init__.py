@@ -68,6 +68,13 @@ Format (every table but ``coordinates`` is optional)::
     coordinate = "q1"                           # or target = "<expression of q>", e.g. "P_x" of a point P
     motion = "1 + 2*pi*t"                       # optional name (default "drive <target>")
 
+    [controller]                                # a controller in the loop (docs/control.md):
+    type = "state_feedback"                     # u = -K (x - x_ref); or type = "pid" (coordinate,
+    input = "u"                                 # setpoint, kp, ki, kd, period)
+    states = ["q1", "q1d"]
+    gains = [{value = 20, unit = "N*m/rad"}, 2.0]   # SI numbers or {value, unit}
+    period = 0.001                              # optional: sampled (zero-order hold)
+
     [[drawing]]                                 # name, points (list of points)
     [[traces]]                                  # name, point
 """

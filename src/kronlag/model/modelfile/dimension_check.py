@@ -6,6 +6,7 @@ from __future__ import annotations
 from ...core.errors import ModelFileError
 from ..dimensions import Dimension, DimensionCheck, DimensionConflict, Place
 from ..symbols import speed_symbol
+from .controller import check_controller_dimensions
 from .model_file import ModelFile
 from .units import si_unit
 
@@ -30,6 +31,7 @@ def check_file_dimensions(document: dict, model: ModelFile) -> None:
                 place = Place(f"parameters.{name}.unit", f"parameter {name}")
                 check.unit(name, Dimension(one.dimensionality), unit=item["unit"], place=place)
         check.system_uses()
+        check_controller_dimensions(check, model)
         for i, drive in enumerate(model.drives.values()):
             check.same(drive.target, drive.motion, Place(f"drives[{i}].motion", f"drives[{i}].motion"))
         for i, limit in enumerate(model.system.limits):

@@ -9,6 +9,7 @@ import re
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import sympy as sp
 
@@ -16,6 +17,9 @@ from ...core.dependencies import dependency_order
 from ...core.errors import DrivesNotAppliedWarning, ModelError
 from ..system import System
 from .units import si_unit
+
+if TYPE_CHECKING:
+    from .controller import ControllerSpec
 
 __all__ = ["ModelFile", "SimulationSettings", "PrescribedMotion", "to_float", "settle_drives"]
 
@@ -70,6 +74,9 @@ class ModelFile:
         adds them (:meth:`kronlag.System.add_drive`).
     source : str or None
         The file the model was read from.
+    controller : StateFeedback or PID or None
+        The ``[controller]`` table (:mod:`.controller`), for ``simulate(controller=...)``
+        (:func:`kronlag.simulation.controllers.file_controller` makes the controller).
     """
 
     system: System
@@ -84,6 +91,7 @@ class ModelFile:
     simulation: SimulationSettings = field(default_factory=SimulationSettings)
     drives: dict[str, PrescribedMotion] = field(default_factory=dict)
     source: str | None = None
+    controller: ControllerSpec | None = None
 
     def numeric_values(self) -> dict[str, float]:
         """Parameter values as floats, resolving values written in terms of other parameters.

@@ -20,6 +20,7 @@ from ..expressions import RESERVED_NAMES, parse_expression
 from ..symbols import speed_symbol, t
 from ..system import System, drive_name
 from .bounds import check_document, check_text, read_bounded
+from .controller import read_controller
 from .dimension_check import check_file_dimensions
 from .formats import FIELD_KINDS, LOAD_FORMATS, read_rotation
 from .model_file import ModelFile, PrescribedMotion, SimulationSettings, settle_drives
@@ -189,7 +190,7 @@ def _read(document: dict, source: str) -> ModelFile:
     reader.table(document, "", required=("coordinates",), optional=(
         "name", "description", "gravity", "parameters", "points", "bodies", "constraints",
         "nonholonomic_constraints", *LOAD_FORMATS, "initial", "simulation", "drives", "drawing", "traces",
-        "joints", "limits"))
+        "joints", "limits", "controller"))
     name = reader.string(document.get("name", Path(source).stem), "name")
     description = reader.string(document.get("description", ""), "description")
     coordinate_list = document["coordinates"]
@@ -216,6 +217,7 @@ def _read(document: dict, source: str) -> ModelFile:
     model = ModelFile(system=system, description=description, values=values, units=units, file_units=file_units,
                       source=source)
     _read_settings(reader, document, model)
+    model.controller = read_controller(reader, document, model)
     with reader.entry("parameters"):
         numbers = model.numeric_values()
     check_file_dimensions(document, model)

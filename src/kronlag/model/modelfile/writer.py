@@ -16,6 +16,7 @@ from ..bodies import BODY_TYPES, Body
 from ..expressions import parse_expression
 from ..symbols import t
 from ..system import System
+from .controller import write_controller
 from .formats import FIELD_KINDS, LOAD_FORMATS
 from .model_file import ModelFile
 
@@ -124,6 +125,8 @@ def _document(model: ModelFile) -> dict[str, Any]:
     document["drawing"] = [{"name": line.name, "points": [writer.vector(p) for p in line.points]}
                            for line in system.drawing]
     document["traces"] = [{"name": trace.name, "point": writer.vector(trace.points[0])} for trace in system.traces]
+    if model.controller is not None:
+        document["controller"] = write_controller(model.controller)
     return document
 
 

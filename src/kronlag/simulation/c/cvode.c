@@ -60,6 +60,7 @@ extern SUNLinearSolver SUNLinSol_Dense(N_Vector y, SUNMatrix A, SUNContext ctx);
 extern int SUNLinSolFree(SUNLinearSolver S);
 extern void *CVodeCreate(int lmm, SUNContext ctx);
 extern int CVodeInit(void *mem, CVRhsFn f, sunrealtype t0, N_Vector y0);
+extern int CVodeReInit(void *mem, sunrealtype t0, N_Vector y0);
 extern int CVodeSStolerances(void *mem, sunrealtype rtol, sunrealtype atol);
 extern int CVodeSetUserData(void *mem, void *data);
 extern int CVodeSetMaxNumSteps(void *mem, long mxsteps);
@@ -97,7 +98,8 @@ typedef struct {
     int generic_rank;                  /* of [Phi_q; A] at the start: redundant rows stay dependent */
     int singular;                      /* the right-hand side met a singular configuration ... */
     double t_singular, y_singular[KL_N];  /* ... there */
-    const kronlag_options *o;          /* limits: the watched functions (limits.c) */
+    const kronlag_options *o;          /* for the limits (limits.c) and the controller (controller.c) */
+    int stopped;                       /* the controller's code to end the run with (0: none) */
 } kl_data;
 
 static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
@@ -107,6 +109,8 @@ static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
     double *dx = N_VGetArrayPointer(ydot);
     double lam[KL_R + 1], mu[KL_S + 1];
     memcpy(dx, x + KL_M, KL_M * sizeof(double));
+    int stop = kl_control_evaluate(data->o, t, x, x + KL_M);
+    if (stop) { data->stopped = stop; return -1; }
     if (!kronlag_forward_dynamics_ranked(t, x, x + KL_M, data->p, data->alpha, data->beta, data->generic_rank,
                                          dx + KL_M, lam, mu)) return 0;
     /* A singular configuration is unrecoverable: remember where, for the message. */
@@ -205,17 +209,24 @@ static void kl_outputs(const kronlag_options *o, int n)
     for (int k = 0; k < n; ++k) {
         const double *q = o->y_out + k * KL_N, *qd = q + KL_M, t = o->t_out[k];
         double *a = o->qdd + k * KL_M, *l = o->lam + k * KL_R, *u = o->mu + k * KL_S;
-        if (kronlag_forward_dynamics(t, q, qd, o->p, 0.0, 0.0, a, l, u)) {
+        /* under a controller, the parameters of the output (a continuous one is called there; an
+         * exception it raises is in the run control already) */
+        if (o->control_mode == KL_CONTROL_CONTINUOUS) {
+            kl_control_call(o, t, q, qd);
+            kl_control_record(o, k);
+        }
+        const double *p = o->control_mode ? o->p_out + (long)k * o->n_parameters : o->p;
+        if (kronlag_forward_dynamics(t, q, qd, p, 0.0, 0.0, a, l, u)) {
             for (int i = 0; i < KL_M; ++i) a[i] = NAN;
             for (int i = 0; i < KL_R; ++i) l[i] = NAN;
             for (int i = 0; i < KL_S; ++i) u[i] = NAN;
         }
-        kl_constraints(t, q, o->p, terms, B, c);
+        kl_constraints(t, q, p, terms, B, c);
         double energy = 0.0;
         for (int i = 0; i < KL_M; ++i)
             for (int j = 0; j < KL_M; ++j) energy += qd[i] * terms[i * KL_M + j] * qd[j];
         o->kinetic_energy[k] = 0.5 * energy;
-        kronlag_potential_energy(t, q, qd, o->p, o->potential_energy + k);
+        kronlag_potential_energy(t, q, qd, p, o->potential_energy + k);
         memcpy(o->position_residual + k * KL_R, terms + KL_PHI, KL_R * sizeof(double));
         for (int i = 0; i < KL_K; ++i) {
             double sum = c[i];
@@ -223,6 +234,35 @@ static void kl_outputs(const kronlag_options *o, int n)
             o->velocity_residual[k * KL_K + i] = sum;
         }
     }
+}
+
+/* CVODE's counters, kept over its restarts at sample instants (CVodeReInit sets them to zero). */
+typedef struct { long steps, nfev, lin_rhs, njev; } kl_cvode_counters;
+
+static void kl_cvode_count(void *mem, kl_cvode_counters *total)
+{
+    long steps = 0, nfev = 0, lin_rhs = 0, njev = 0;
+    CVodeGetNumSteps(mem, &steps);
+    CVodeGetNumRhsEvals(mem, &nfev);
+    CVodeGetNumLinRhsEvals(mem, &lin_rhs);
+    CVodeGetNumJacEvals(mem, &njev);
+    total->steps += steps; total->nfev += nfev; total->lin_rhs += lin_rhs; total->njev += njev;
+}
+
+/* At the sample instant t (CVODE stopped there): call the sampled controller at the state y, then
+ * restart CVODE at (t, y) with the new parameters, stopping at the next sample instant (*t_sample)
+ * or t1.  CVODE estimates the first step again: the step it had, at order 1, failed its error test
+ * (cart-pole at 1 kHz: twice the evaluations).  Returns 0 or the KRONLAG_RESULT_* code to end with. */
+static int kl_cvode_sample(const kronlag_options *o, void *mem, N_Vector y, double t, double *t_sample,
+                           kl_cvode_counters *counted)
+{
+    const double *x = N_VGetArrayPointer(y);
+    int stop = kl_control_call(o, t, x, x + KL_M);
+    if (stop) return stop;
+    kl_cvode_count(mem, counted);
+    *t_sample = kl_control_next_sample(o);
+    if (CVodeReInit(mem, t, y) || CVodeSetStopTime(mem, fmin(o->t1, *t_sample))) return KRONLAG_RESULT_SOLVER_FAILED;
+    return 0;
 }
 
 /* Integrate o->y0 from o->t0 to o->t1 in at most o->max_steps steps, CVODE's order at most
@@ -237,12 +277,14 @@ int kronlag_cvode(kronlag_options *o)
     int major = 0, minor = 0, patch = 0;
     char label[64];
     SUNDIALSGetVersionNumber(&major, &minor, &patch, label, sizeof label);
-    const double *p = o->p, *t_eval = o->t_eval;
+    const double *p = kl_control_parameters(o), *t_eval = o->t_eval;
     double t0 = o->t0, t1 = o->t1, *y_out = o->y_out, *y_end = o->y_end;
     memcpy(y_end, o->y0, KL_N * sizeof(double));
     if (major != 7) return KL_VERSION_MISMATCH;
     int n_eval = o->n_eval;
-    kl_data data = {p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}, o};
+    kl_data data = {p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}, o, 0};
+    double t_sample = kl_control_next_sample(o);  /* INFINITY without a sampled controller */
+    kl_cvode_counters counted = {0, 0, 0, 0};
     SUNContext ctx = NULL;
     N_Vector y = NULL, dense = NULL;
     SUNMatrix J = NULL;
@@ -267,7 +309,8 @@ int kronlag_cvode(kronlag_options *o)
     memcpy(x, o->y0, KL_N * sizeof(double));
     if (CVodeInit(mem, kl_rhs, t0, y) || CVodeSStolerances(mem, o->rtol, o->atol) || CVodeSetUserData(mem, &data)
         || CVodeSetLinearSolver(mem, LS, J) || (o->max_order > 0 && CVodeSetMaxOrd(mem, o->max_order))
-        || CVodeSetMaxNumSteps(mem, o->max_steps) || CVodeSetStopTime(mem, t1) || CVodeSetMaxHnilWarns(mem, -1))
+        || CVodeSetMaxNumSteps(mem, o->max_steps) || CVodeSetStopTime(mem, fmin(t1, t_sample))
+        || CVodeSetMaxHnilWarns(mem, -1))
         goto done;
     int n_roots = kl_limit_count(o);
     if (n_roots > 0) {  /* limits: a segment ends where a watched function falls through zero */
@@ -279,11 +322,13 @@ int kronlag_cvode(kronlag_options *o)
     if (n_eval == 0) {
         o->t_out[0] = t0;
         memcpy(y_out, x, KL_N * sizeof(double));
+        kl_control_record(o, 0);
         rows = 1;
     } else {
         for (; next < n_eval && t_eval[next] <= t0; ++next, ++rows) {
             o->t_out[rows] = t_eval[next];
             memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
+            kl_control_record(o, rows);
         }
     }
     for (long steps = 0; t < t1; ++steps) {
@@ -306,24 +351,30 @@ int kronlag_cvode(kronlag_options *o)
             kronlag_Phi_q(t, x, zero, p, Phi_q);
             ratio = kl_monitor_observe(&monitor, t, x, Phi_q);
         }
-        if (n_eval == 0) {
-            if (rows == o->max_rows) { flag = KRONLAG_RESULT_OUTPUTS_FULL; break; }
+        /* outputs before t (interpolated); at a sample instant the controller is called and CVODE
+         * restarted; then the output at t itself, with the parameters that hold from t on */
+        for (; n_eval > 0 && next < n_eval && t_eval[next] < t; ++next, ++rows) {
+            CVodeGetDky(mem, t_eval[next], 0, dense);
+            o->t_out[rows] = t_eval[next];
+            memcpy(y_out + rows * KL_N, xi, KL_N * sizeof(double));
+            kl_control_record(o, rows);
+            if (kl_project(t_eval[next], y_out + rows * KL_N, &data)) {
+                flag = KRONLAG_RESULT_PROJECTION_FAILED;
+                break;
+            }
+        }
+        if (flag) break;
+        if (t >= t_sample && t < t1 && (flag = kl_cvode_sample(o, mem, y, t, &t_sample, &counted))) break;
+        if (n_eval == 0 && rows == o->max_rows) { flag = KRONLAG_RESULT_OUTPUTS_FULL; break; }
+        for (int at_t = n_eval == 0; at_t || (next < n_eval && t_eval[next] <= t); at_t = 0) {
             o->t_out[rows] = t;
             memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
+            kl_control_record(o, rows);
             if (kl_project(t, y_out + rows * KL_N, &data)) { flag = KRONLAG_RESULT_PROJECTION_FAILED; break; }
             ++rows;
-        } else {
-            for (; next < n_eval && t_eval[next] <= t; ++next, ++rows) {
-                CVodeGetDky(mem, t_eval[next], 0, dense);
-                o->t_out[rows] = t_eval[next];
-                memcpy(y_out + rows * KL_N, xi, KL_N * sizeof(double));
-                if (kl_project(t_eval[next], y_out + rows * KL_N, &data)) {
-                    flag = KRONLAG_RESULT_PROJECTION_FAILED;
-                    break;
-                }
-            }
-            if (flag) break;
+            if (n_eval > 0) ++next;
         }
+        if (flag) break;
         if (rooted) {  /* limits: CVODE stopped at the root, t and x are there */
             int found[n_roots];
             CVodeGetRootInfo(mem, found);
@@ -336,8 +387,11 @@ int kronlag_cvode(kronlag_options *o)
         if (ratio < KRONLAG_APPROACH_RTOL || kl_rank_rose(t, x, &data)) { flag = KRONLAG_RESULT_APPROACH; break; }
     }
     memcpy(y_end, x, KL_N * sizeof(double));
-    if ((flag == KRONLAG_RESULT_APPROACH || flag == KRONLAG_RESULT_LIMIT) && kl_project(t, y_end, &data)) flag = KRONLAG_RESULT_PROJECTION_FAILED;
-    if (flag < 0 && data.singular) {
+    if ((flag == KRONLAG_RESULT_APPROACH || flag == KRONLAG_RESULT_LIMIT) && kl_project(t, y_end, &data))
+        flag = KRONLAG_RESULT_PROJECTION_FAILED;
+    if (flag < 0 && data.stopped) {
+        flag = data.stopped;
+    } else if (flag < 0 && data.singular) {
         flag = KRONLAG_RESULT_SINGULAR;
         t = data.t_singular;
         memcpy(y_end, data.y_singular, KL_N * sizeof(double));
@@ -347,16 +401,13 @@ done:
     o->n_out = rows;
     o->n_events = monitor.count;
     o->t_end = t;
-    o->steps = o->nfev = o->njev = 0;
     if (mem) {
-        long lin_rhs = 0;
-        CVodeGetNumSteps(mem, &o->steps);
-        CVodeGetNumRhsEvals(mem, &o->nfev);
-        CVodeGetNumLinRhsEvals(mem, &lin_rhs);
-        o->nfev += lin_rhs;
-        CVodeGetNumJacEvals(mem, &o->njev);
+        kl_cvode_count(mem, &counted);
         CVodeFree(&mem);
     }
+    o->steps = counted.steps;
+    o->nfev = counted.nfev + counted.lin_rhs;
+    o->njev = counted.njev;
     if (LS) SUNLinSolFree(LS);
     if (J) SUNMatDestroy(J);
     if (dense) N_VDestroy(dense);

@@ -52,7 +52,19 @@ typedef struct {
     double J[KL3_M * KL3_M];
     int pivots[KL3_M];
     long newton_iterations, jacobians;
+    const kronlag_options *o;   /* for the controller (controller.c) */
+    int stopped;                /* the controller's code to end the run with (0: none) */
 } kl3_state;
+
+/* Before an evaluation at (t, q, v): a continuous controller sets the parameters (s->p and the head
+ * of s->pext).  Returns 0 or the code to end the run with (also in s->stopped). */
+static int kl3_control(kl3_state *s, double t, const double *q, const double *v)
+{
+    if (s->o->control_mode != KL_CONTROL_CONTINUOUS) return 0;
+    s->stopped = kl_control_call(s->o, t, q, v);
+    memcpy(s->pext, s->p, s->n_parameters * sizeof(double));
+    return s->stopped;
+}
 
 static double kl3_norm(const double *e, const double *q0, const double *q1, const kl3_state *s)
 {
@@ -98,6 +110,7 @@ static int kl3_step(kl3_state *s, double t, double h, const double *q0, const do
             v1[i] = 2.0 / h * (q1[i] - q0[i]) - v0[i];
             a[i] = 4.0 / (h * h) * (q1[i] - q0[i]) - 4.0 / h * v0[i] - a0[i];
         }
+        if (kl3_control(s, t1, q1, v1)) return s->stopped;
         kronlag_dynamics(t1, q1, v1, s->p, s->terms);
         for (int k = 0; k < r; ++k) {
             if (iteration > 0) lamstar[k] += alpha * Phi[k];
@@ -150,6 +163,7 @@ static int kl3_step(kl3_state *s, double t, double h, const double *q0, const do
     kl3_project(s, Phi_q, residual, c * alpha, x);
     for (int i = 0; i < m; ++i) v1[i] -= x[i];
     /* acceleration projection with gamma at the projected velocities */
+    if (kl3_control(s, t1, q1, v1)) return s->stopped;
     kronlag_dynamics(t1, q1, v1, s->p, s->terms);
     for (int k = 0; k < r; ++k) {
         double sum = -gamma[k];
@@ -176,7 +190,11 @@ static void kl3_output(kl3_state *s, kronlag_options *o, int row, int current, d
 {
     enum { m = KL3_M, r = KL3_R };
     double forces[m], lam[r + 1];
-    if (!current) kronlag_dynamics(t, q, v, s->p, s->terms);  /* else s->terms are those of (t, q, v) */
+    if (!current) {  /* else s->terms are those of (t, q, v) */
+        kl3_control(s, t, q, v);  /* an exception is in the run control already */
+        kronlag_dynamics(t, q, v, s->p, s->terms);
+    }
+    kl_control_record(o, row);
     for (int i = 0; i < m; ++i) {
         double sum = s->terms[KRONLAG_DYNAMICS_H + i];
         for (int j = 0; j < m; ++j) sum -= s->terms[KRONLAG_DYNAMICS_M + i * m + j] * a[j];
@@ -259,14 +277,14 @@ static double kl3_locate(const kronlag_options *o, double h, const double *q, co
 int kronlag_index3(kronlag_options *o)
 {
     enum { m = KL3_M, r = KL3_R };
-    const double *p = o->p, *t_eval = o->t_eval;
-    double t0 = o->t0, t1 = o->t1, max_step = o->max_step;
+    const double *p = kl_control_parameters(o), *t_eval = o->t_eval;
+    double t0 = o->t0, t1 = o->t1, max_step = o->max_step, t_sample = kl_control_next_sample(o);
     int n_parameters = o->n_parameters, n_eval = o->n_eval;
     double pext[n_parameters + m + r + 1];
     kl3_state s;
     memset(&s, 0, sizeof s);
     memcpy(pext, p, n_parameters * sizeof(double));
-    s.p = p; s.pext = pext; s.n_parameters = n_parameters; s.rtol = o->rtol; s.atol = o->atol;
+    s.p = p; s.pext = pext; s.n_parameters = n_parameters; s.rtol = o->rtol; s.atol = o->atol; s.o = o;
     double q[m], v[m], a[m], lam[r + 1], qn[m], vn[m], an[m], lamn[r + 1];
     memcpy(q, o->y0, m * sizeof(double));
     memcpy(v, o->y0 + m, m * sizeof(double));
@@ -308,10 +326,12 @@ int kronlag_index3(kronlag_options *o)
     if (n_roots > 0) kl_limit_values(o, q, lam, before);
     while (t < t1) {
         if (steps >= o->max_steps) { flag = KRONLAG_RESULT_MAX_STEPS; break; }
-        int last = t + h >= t1 - h_min;
-        if (last) h = t1 - t;
+        double t_stop = fmin(t1, t_sample);  /* a sampled controller's next sample instant */
+        int last = t + h >= t_stop - h_min;
+        if (last) h = t_stop - t;
         double error = 0.0;
         int result = kl3_step(&s, t, h, q, v, a, lam, qn, vn, an, lamn, &error);
+        if (s.stopped) { flag = s.stopped; break; }
         if (result == 0 && !(error <= 1.0)) result = KL3_ERROR_TEST_FAILED;  /* NaN included */
         if (result != 0) {
             int failure = result == KL3_ERROR_TEST_FAILED ? KRONLAG_RESULT_STEP_TOO_SMALL : result;
@@ -322,7 +342,7 @@ int kronlag_index3(kronlag_options *o)
             continue;
         }
         retry = 0;
-        double t_new = last ? t1 : t + h;
+        double t_new = last ? t_stop : t + h;
         if (n_roots > 0) {  /* limits: the step ends where a watched function falls through zero */
             kl_limit_values(o, qn, lamn, after);
             if (kl_limit_fell(o, before, after)) {
@@ -337,16 +357,33 @@ int kronlag_index3(kronlag_options *o)
             }
             memcpy(before, after, n_roots * sizeof(double));
         }
+        int sample = t_new >= t_sample && t_new < t1;  /* none at the end */
         /* the terms of the step's last evaluation are those of (qn, vn) */
         double ratio = kl_monitor_observe(&monitor, t_new, qn, s.terms + KRONLAG_DYNAMICS_PHI_Q);
         if (n_eval == 0) {
             if (rows == o->max_rows) { flag = KRONLAG_RESULT_OUTPUTS_FULL; break; }
-            kl3_output(&s, o, rows++, !rooted, t_new, qn, vn, an);
+            if (!sample) kl3_output(&s, o, rows++, !rooted, t_new, qn, vn, an);
         } else {
-            for (; next < n_eval && t_eval[next] <= t_new; ++next) {
+            /* at a sample instant, the output there comes after the sample (below) */
+            for (; next < n_eval && (sample ? t_eval[next] < t_new : t_eval[next] <= t_new); ++next) {
                 double theta = (t_eval[next] - t) / h, qi[m], vi[m], ai[m], li[r + 1];
                 kl3_interpolate(theta, h, q, v, a, lam, qn, vn, an, lamn, qi, vi, ai, li);
                 kl3_output(&s, o, rows++, 0, t_eval[next], qi, vi, ai);
+            }
+        }
+        if (sample) {  /* the sampled controller, then the accelerations with its new parameters */
+            int stop = kl_control_call(o, t_new, qn, vn);
+            if (stop) { flag = stop; break; }
+            memcpy(pext, p, n_parameters * sizeof(double));
+            t_sample = kl_control_next_sample(o);
+            double accelerations[m], multipliers[r + 1], unused[KRONLAG_S + 1];
+            if (!kronlag_forward_dynamics(t_new, qn, vn, p, 0.0, 0.0, accelerations, multipliers, unused)) {
+                memcpy(an, accelerations, sizeof accelerations);
+                memcpy(lamn, multipliers, r * sizeof(double));
+            }
+            for (int at_t = n_eval == 0; at_t || (next < n_eval && t_eval[next] <= t_new); at_t = 0) {
+                kl3_output(&s, o, rows++, 0, t_new, qn, vn, an);
+                if (n_eval > 0) ++next;
             }
         }
         t = t_new;

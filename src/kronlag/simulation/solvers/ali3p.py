@@ -44,6 +44,7 @@ class Index3Solver(Solver):
     integrator = "trapezoidal rule with local error control, compiled"
     order = 2
     requirements = "the C backend, constant parameters, no nonholonomic constraints and a C compiler"
+    samples_inside = True
     #: The driver's ``rtol`` and ``atol`` are the requested ones divided by this, neither below
     #: :data:`~kronlag.numeric.tolerances.INDEX3_TIGHTEST`: the local error of a second-order
     #: method accumulates over ~1e4 steps, and its error control bounds the positions only, while

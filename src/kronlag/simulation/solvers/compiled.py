@@ -60,6 +60,7 @@ class CompiledSolver(Solver):
     order = 12
     min_order = 1
     requirements = "the C backend, constant parameters and a C compiler"
+    samples_inside = True
     #: CVODE's tolerances are the requested ones divided by this (see above).
     TOLERANCE_SCALE = 1e4
 

@@ -38,6 +38,7 @@ class SwitchingSolver(Solver):
     requirements = Index3Solver.requirements
     supports = staticmethod(Index3Solver.supports)
     stabilization = CompiledSolver.stabilization
+    samples_inside = True
 
     def solve(self, problem: MultibodyProblem) -> Solution:
         require(self, problem.model)
