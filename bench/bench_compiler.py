@@ -11,18 +11,23 @@ Each compiler runs in a fresh Python process with an empty compiled-library cach
 (``$KRONLAG_CACHE``): the system's with the environment as it is, zig's with ``$CC`` unset and
 PATH holding only the Python interpreter (so that kronlag finds no system compiler and says so),
 and zig's own cache (``$ZIG_GLOBAL_CACHE_DIR``) new for this run, so that nothing is reused from
-an earlier one.  Timed there (``time.perf_counter``; calls: best of several repeats):
+an earlier one.  Timed there (``time.perf_counter``):
 
 * *first use*: :func:`kronlag.numeric.codegen.c_compiler`, the probe that compiles and links a
   small shared library; for zig in a new cache this includes building its C runtime once;
 * *build*: ``eom.numeric(parameters, backend="c")`` of the four-bar (the dynamics kernel and the
   solver), then the libraries of the compiled drivers (CVODE's and ALI3-P's, the model's C with
   the driver);
-* *forward dynamics*: ``model.forward_dynamics(q, qd)`` per call;
-* *simulate*: ``kronlag.simulate`` of the four-bar over 10 s by the default method, outputs at
-  every step (the libraries built before);
 * with ``--chain N``: ``eom.numeric`` of ``closed_chain(N, "relative")`` (large generated
   kernels, compiled in parallel parts).
+
+Then both builds of the four-bar are loaded into this process from those caches and timed in
+turns (system, zig, system, zig, ...: the load of a shared machine weighs on both alike), the best
+of 7 rounds each:
+
+* *forward dynamics*: ``model.forward_dynamics(q, qd)`` per call;
+* *simulate*: ``kronlag.simulate`` of the four-bar over 10 s by the default method, outputs at
+  every step.
 
 The results of the two builds are compared (forward dynamics and the trajectory's last state); the
 ratios printed are zig / system (1.00: the same; above 1: zig slower).
