@@ -324,6 +324,19 @@ def test_four_bar_with_a_stop_from_a_model_file(tmp_path):
         assert np.max(np.abs(model.Phi_q(trajectory.q[after]) @ trajectory.qd[after])) < 1e-9
 
 
+def test_limits_are_written_to_model_files_and_read_back(tmp_path):
+    from kronlag.model.modelfile.writer import to_toml
+
+    path = tmp_path / "model.toml"
+    path.write_text(BALL_FILE)
+    text = to_toml(kronlag.load_model(path))
+    assert "[[limits]]" in text
+    (tmp_path / "again.toml").write_text(text)
+    (limit,) = kronlag.load_model(tmp_path / "again.toml").system.limits
+    assert (limit.name, str(limit.value), str(limit.lower), limit.upper, str(limit.restitution)) == (
+        "floor", "y", "floor", None, "e")
+
+
 @pytest.mark.parametrize(("change", "message"), [
     (('lower = "floor"', 'lower = "g"'), "limits[0].lower"),
     (('restitution = "e"', 'restitution = "m"'), "limits[0].restitution"),
