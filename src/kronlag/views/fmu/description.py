@@ -1,0 +1,186 @@
+"""The variables of a kronlag FMU and its ``modelDescription.xml`` (FMI 2.0).
+
+Value references, one block after the other (:class:`Layout`): the states ``q`` and ``qd``
+(outputs), their derivatives, every model parameter (in the order of the parameter vector ``p``:
+tunable parameters, the defined ones as calculated parameters, the input parameters as inputs),
+the three settings of the integration (Baumgarte's ``alpha`` and ``beta``, the drift tolerance),
+then the outputs: the multipliers ``lambda[<constraint>]``, the joint reactions
+``<joint>.F<axis>`` and ``<joint>.M<axis>`` and the energies.  The C side reads the same blocks
+from the macros :meth:`Layout.c_macros` prints (``kronlag/views/fmu/c/fmu2.c``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from xml.sax.saxutils import quoteattr
+
+from ...numeric.reactions import REACTION_UNITS
+
+__all__ = ["Variable", "Layout", "SETTINGS", "ENERGIES", "model_description", "UNIT_EXPONENTS"]
+
+#: The settings of the integration exported as parameters: name, start value, description.
+SETTINGS = (("kronlag.alpha", "Baumgarte alpha of the index-1 ODE (1/s)"),
+            ("kronlag.beta", "Baumgarte beta of the index-1 ODE (1/s)"),
+            ("kronlag.drift_tolerance", "largest constraint residual before a step event projects the states "
+                                        "(model exchange)"))
+
+#: The energy outputs, in the order of the C outputs.
+ENERGIES = ("kinetic_energy", "potential_energy", "energy")
+
+#: SI base-unit exponents of the units the outputs use.
+UNIT_EXPONENTS = {REACTION_UNITS["force"]: {"kg": 1, "m": 1, "s": -2},
+                  REACTION_UNITS["couple"]: {"kg": 1, "m": 2, "s": -2},
+                  "J": {"kg": 1, "m": 2, "s": -2}}
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One FMI ``ScalarVariable`` (all are Real)."""
+
+    name: str
+    reference: int
+    causality: str
+    variability: str
+    initial: str | None = None
+    start: float | None = None
+    description: str = ""
+    unit: str | None = None
+    derivative: int | None = None  # the value reference of the state this is the derivative of
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The value references of an FMU's variables, block by block (see the module docstring)."""
+
+    coordinates: tuple[str, ...]
+    speeds: tuple[str, ...]
+    parameters: tuple[str, ...]
+    multipliers: tuple[str, ...]
+    reactions: tuple[str, ...]
+
+    @property
+    def m(self) -> int:
+        return len(self.coordinates)
+
+    @property
+    def offsets(self) -> dict[str, int]:
+        """First value reference of each block, and ``count``, one past the last."""
+        sizes = {"states": 2 * self.m, "derivatives": 2 * self.m, "parameters": len(self.parameters),
+                 "settings": len(SETTINGS), "outputs": len(self.multipliers) + len(self.reactions) + len(ENERGIES)}
+        offsets, start = {}, 0
+        for block, size in sizes.items():
+            offsets[block], start = start, start + size
+        return offsets | {"count": start}
+
+    def c_macros(self) -> str:
+        """The ``KL_VR_*`` and ``KL_OUT_*`` macros of ``fmu2.c``."""
+        offsets = self.offsets
+        settings = offsets["settings"]
+        lines = [f"#define KL_VR_DERIVATIVES {offsets['derivatives']}",
+                 f"#define KL_VR_PARAMETERS {offsets['parameters']}",
+                 f"#define KL_VR_ALPHA {settings}", f"#define KL_VR_BETA {settings + 1}",
+                 f"#define KL_VR_DRIFT_TOLERANCE {settings + 2}",
+                 f"#define KL_VR_OUTPUTS {offsets['outputs']}", f"#define KL_VR_COUNT {offsets['count']}",
+                 f"#define KL_VR_OUTPUTS_COUNT {offsets['count'] - offsets['outputs']}",
+                 "#define KL_OUT_LAMBDA 0", f"#define KL_OUT_REACTIONS {len(self.multipliers)}",
+                 f"#define KL_OUT_ENERGY {len(self.multipliers) + len(self.reactions)}"]
+        return "\n".join(lines) + "\n"
+
+    def variables(self, *, start_state: Sequence[float], parameter_values: Sequence[float],
+                  calculated: Sequence[str], inputs: Sequence[str], settings: Sequence[float],
+                  units: Mapping[str, str], reaction_units: Mapping[str, str]) -> list[Variable]:
+        """Every variable, in value-reference order."""
+        offsets, m = self.offsets, self.m
+        variables = [Variable(name, k, "output", "continuous", "approx", float(start_state[k]),
+                              "coordinate (start: projected onto the constraints)" if k < m else "speed",
+                              units.get(name))
+                     for k, name in enumerate(self.coordinates + self.speeds)]
+        variables += [Variable(f"der({name})", offsets["derivatives"] + k, "local", "continuous", "calculated",
+                               derivative=k) for k, name in enumerate(self.coordinates + self.speeds)]
+        for k, (name, value) in enumerate(zip(self.parameters, parameter_values)):
+            reference = offsets["parameters"] + k
+            if name in calculated:
+                variables.append(Variable(name, reference, "calculatedParameter", "tunable", "calculated",
+                                          description="defined by an expression of other parameters",
+                                          unit=units.get(name)))
+            elif name in inputs:
+                variables.append(Variable(name, reference, "input", "continuous", None, float(value),
+                                          "input parameter (enters the generalized forces only)", units.get(name)))
+            else:
+                variables.append(Variable(name, reference, "parameter", "tunable", "exact", float(value),
+                                          unit=units.get(name)))
+        variables += [Variable(name, offsets["settings"] + k, "parameter", "fixed", "exact", float(value), text)
+                      for k, ((name, text), value) in enumerate(zip(SETTINGS, settings))]
+        outputs = self.multipliers + self.reactions + ENERGIES
+        output_units = {**reaction_units, **{name: "J" for name in ENERGIES}}
+        variables += [Variable(name, offsets["outputs"] + k, "output", "continuous", "calculated",
+                               unit=output_units.get(name)) for k, name in enumerate(outputs)]
+        return variables
+
+
+def _scalar_variable(variable: Variable) -> str:
+    attributes = [f"name={quoteattr(variable.name)}", f'valueReference="{variable.reference}"',
+                  f'causality="{variable.causality}"', f'variability="{variable.variability}"']
+    if variable.initial:
+        attributes.append(f'initial="{variable.initial}"')
+    if variable.description:
+        attributes.append(f"description={quoteattr(variable.description)}")
+    real = []
+    if variable.unit in UNIT_EXPONENTS:
+        real.append(f"unit={quoteattr(variable.unit)}")
+    if variable.start is not None:
+        real.append(f'start="{variable.start!r}"')
+    if variable.derivative is not None:
+        real.append(f'derivative="{variable.derivative + 1}"')  # 1-based index of ModelVariables
+    return f"    <ScalarVariable {' '.join(attributes)}>\n      <Real {' '.join(real)}/>\n    </ScalarVariable>"
+
+
+def _unit_definitions() -> str:
+    lines = []
+    for name, exponents in UNIT_EXPONENTS.items():
+        base = " ".join(f'{unit}="{power}"' for unit, power in exponents.items())
+        lines.append(f"    <Unit name={quoteattr(name)}><BaseUnit {base}/></Unit>\n")
+    return f"  <UnitDefinitions>\n{''.join(lines)}  </UnitDefinitions>\n"
+
+
+def model_description(*, model_name: str, identifier: str, guid: str, description: str, tool: str, date: str,
+                      variables: Sequence[Variable], source_file: str, stop_time: float, tolerance: float,
+                      kinds: Sequence[str]) -> str:
+    """The ``modelDescription.xml`` of an FMU with the interfaces ``kinds`` ("model-exchange",
+    "co-simulation") in one binary."""
+    sources = f'\n    <SourceFiles>\n      <File name={quoteattr(source_file)}/>\n    </SourceFiles>\n  '
+    common = ('canNotUseMemoryManagementFunctions="false" canGetAndSetFMUstate="false" '
+              'canSerializeFMUstate="false" providesDirectionalDerivative="false"')
+    index = {variable.reference: k + 1 for k, variable in enumerate(variables)}  # 1-based
+    outputs = [index[v.reference] for v in variables if v.causality == "output"]
+    derivatives = [index[v.reference] for v in variables if v.derivative is not None]
+    initial = sorted(index[v.reference] for v in variables
+                     if (v.causality == "output" and v.initial in ("approx", "calculated"))
+                     or v.causality == "calculatedParameter" or v.derivative is not None)
+
+    def unknowns(indices: Sequence[int]) -> str:
+        return "".join(f'      <Unknown index="{k}"/>\n' for k in indices)
+
+    interfaces = {
+        "model-exchange": f'  <ModelExchange modelIdentifier="{identifier}" {common} '
+                          f'completedIntegratorStepNotNeeded="false">{sources}</ModelExchange>\n',
+        "co-simulation": f'  <CoSimulation modelIdentifier="{identifier}" {common} '
+                         'canHandleVariableCommunicationStepSize="true" canInterpolateInputs="false" '
+                         f'maxOutputDerivativeOrder="0" canRunAsynchronuously="false">{sources}</CoSimulation>\n'}
+    return (
+        '<?xml version="1.0" encoding="UTF-8"?>\n'
+        f'<fmiModelDescription fmiVersion="2.0" modelName={quoteattr(model_name)} guid="{guid}" '
+        f'description={quoteattr(description)} generationTool={quoteattr(tool)} generationDateAndTime="{date}" '
+        f'variableNamingConvention="flat" numberOfEventIndicators="0">\n'
+        + "".join(interfaces[kind] for kind in ("model-exchange", "co-simulation") if kind in kinds)
+        + _unit_definitions()
+        + '  <LogCategories>\n    <Category name="logStatusError"/>\n  </LogCategories>\n'
+        f'  <DefaultExperiment startTime="0.0" stopTime="{float(stop_time)!r}" tolerance="{float(tolerance)!r}"/>\n'
+        '  <ModelVariables>\n' + "\n".join(map(_scalar_variable, variables)) + '\n  </ModelVariables>\n'
+        '  <ModelStructure>\n'
+        f'    <Outputs>\n{unknowns(outputs)}    </Outputs>\n'
+        f'    <Derivatives>\n{unknowns(derivatives)}    </Derivatives>\n'
+        f'    <InitialUnknowns>\n{unknowns(initial)}    </InitialUnknowns>\n'
+        '  </ModelStructure>\n'
+        '</fmiModelDescription>\n')
