@@ -10,6 +10,7 @@ import json
 import subprocess
 import sys
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -110,6 +111,42 @@ def test_variables_states_parameters_inputs_outputs(exported):
     assert any(name.startswith("binaries/linux64/libsundials_cvode") for name in names)
 
 
+def test_the_shipped_sources_build_the_fmu_again(exported, tmp_path):
+    """sources/ (the C, the FMI headers) compiles with the shipped SUNDIALS libraries into a library
+    exporting the FMI 2.0 functions; buildDescription.xml follows FMI 3.0's schema."""
+    import ctypes
+    import os
+
+    from lxml import etree
+
+    path = exported["four_bar"][3]
+    with zipfile.ZipFile(path) as archive:
+        archive.extractall(tmp_path)
+    schema = Path(fmpy.__file__).parent / "schema" / "fmi3" / "fmi3BuildDescription.xsd"
+    etree.XMLSchema(etree.parse(str(schema))).assertValid(etree.parse(str(tmp_path / "sources" / "buildDescription.xml")))
+    binaries = tmp_path / "binaries" / "linux64"
+    libraries = sorted(str(file) for file in binaries.glob("libsundials_*"))
+    built = tmp_path / "rebuilt.so"
+    compiler = kronlag.numeric.codegen.c_compiler()
+    done = subprocess.run([compiler, "-O1", "-fPIC", "-shared", "-std=gnu99", f"-I{tmp_path / 'sources'}", "-o",
+                           str(built), str(tmp_path / "sources" / "four_bar.c"), *libraries,
+                           f"-Wl,-rpath,{binaries}", "-lm"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    library = ctypes.CDLL(str(built), mode=os.RTLD_LOCAL)
+    library.fmi2GetVersion.restype = ctypes.c_char_p
+    assert library.fmi2GetVersion() == b"2.0"
+
+
+def test_co_simulation_only(slider_crank_model, tmp_path):
+    from fmpy.validation import validate_fmu
+
+    model, q0, qd0 = slider_crank_model
+    path = kronlag.export_fmu(model, tmp_path / "cs.fmu", q0=q0, qd0=qd0, kinds="co-simulation")
+    description = fmpy.read_model_description(str(path))
+    assert description.modelExchange is None and description.coSimulation is not None
+    assert validate_fmu(str(path)) == []
+
+
 def test_reaction_outputs_by_joint_name(exported):
     """The outputs carry every joint's reaction by name, and agree with kronlag's reactions at the FMU's states."""
     model, _, _, path = exported["five_bar"]
@@ -161,6 +198,9 @@ def test_the_cli_exports_an_fmu(tmp_path, capsys):
     from fmpy.validation import validate_fmu
 
     assert validate_fmu(str(target)) == []
+    variables = {v.name: v for v in fmpy.read_model_description(str(target)).modelVariables}
+    assert (variables["q1"].unit, variables["q1d"].unit, variables["x"].unit, variables["energy"].unit) \
+        == ("rad", "rad/s", "m", "J")
 
 
 def test_export_needs_lang_or_fmu(capsys):

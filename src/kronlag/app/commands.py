@@ -175,7 +175,7 @@ def _export_fmu(arguments: argparse.Namespace) -> None:
     numeric = numeric_model(model)
     q0, qd0 = initial_state(model, numeric)
     path = export_fmu(numeric, arguments.fmu, q0=q0, qd0=qd0, stop_time=model.simulation.t_end,
-                      tolerance=model.simulation.rtol)
+                      tolerance=model.simulation.rtol, units={**model.units, **model_units(model)})
     print(f"{path}: FMI 2.0 FMU (model exchange and co-simulation) of {model.system.name!r}")
 
 

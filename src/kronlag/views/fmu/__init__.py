@@ -133,7 +133,8 @@ def _positive(value: float, name: str) -> float:
 def export_fmu(model: NumericModel, path: str | Path, *, q0=None, qd0=None, inputs: Iterable[str] | None = None,
                fmi_version: str = "2.0", kinds: Sequence[str] | str = KINDS, stop_time: float = 1.0,
                tolerance: float = 1e-8, alpha: float = 10.0, beta: float = 10.0,
-               drift_tolerance: float = 1e-6, model_identifier: str | None = None) -> Path:
+               drift_tolerance: float = 1e-6, model_identifier: str | None = None,
+               units: Mapping[str, str] | None = None) -> Path:
     """Write ``model`` as an FMU (FMI 2.0) compiled for this platform.
 
     The FMU has the states ``q`` and ``qd`` (outputs; start values ``q0``, ``qd0``, projected onto the
@@ -169,6 +170,11 @@ def export_fmu(model: NumericModel, path: str | Path, *, q0=None, qd0=None, inpu
         Constraint residual that triggers a projection in model exchange (``kronlag.drift_tolerance``).
     model_identifier : str, optional
         Default: the system's name as a C identifier.
+    units : mapping of str to str, optional
+        Units of coordinates and parameters by name (and ``"energy"``), as a model file gives them
+        (``kronlag.app.workflows.model_units`` and ``ModelFile.units``); the speeds get ``<unit>/s``.
+        Reactions are in ``N`` and ``N*m``, energies in ``J`` unless given.  Units pint does not
+        know are left out.
 
     Returns
     -------
@@ -216,7 +222,7 @@ def export_fmu(model: NumericModel, path: str | Path, *, q0=None, qd0=None, inpu
                       start_state=start, calculated=calculated, settings=settings, rtol=tolerance,
                       max_steps=_MAX_STEPS)
     variables = layout.variables(start_state=start, parameter_values=model.parameter_vector(),
-                                 calculated=calculated, inputs=input_names, settings=settings, units={},
+                                 calculated=calculated, inputs=input_names, settings=settings, units=units or {},
                                  reaction_units=reaction_units)
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     description = model_description(model_name=system.name, identifier=identifier, guid=guid,

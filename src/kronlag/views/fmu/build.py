@@ -13,12 +13,14 @@ run path ``$ORIGIN``).
 from __future__ import annotations
 
 import importlib.util
+import re
 import shutil
 import subprocess
 import sys
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 import sympy as sp
@@ -169,8 +171,15 @@ def compile_fmu(source: str, identifier: str, binaries: Path, sources: Path) -> 
 
 
 def build_description(identifier: str, libraries: Sequence[str]) -> str:
-    """``sources/buildDescription.xml`` (the FMI 3.0 format, which FMI 2.0.4 allows for source FMUs)."""
-    links = "".join(f'      <Library name="{name}"/>\n' for name in libraries)
+    """``sources/buildDescription.xml`` (the FMI 3.0 format, which FMI 2.0.4 allows for source FMUs):
+    the source file and the SUNDIALS libraries (file names ``lib<name>[-<hash>].so.<version>``)."""
+    links = []
+    for file in libraries:
+        match = re.fullmatch(r"lib(\w+?)(?:-[0-9a-f]+)?\.so\.([\d.]+)", file)
+        name, release = match.groups() if match else (file, "")
+        links.append(f'    <Library name="{name}"{f" version={quoteattr(release)}" if release else ""} '
+                     f'description={quoteattr(f"binaries/{PLATFORM}/{file}")}/>\n')
+    links = "".join(links)
     return ('<?xml version="1.0" encoding="UTF-8"?>\n'
             '<fmiBuildDescription fmiVersion="3.0">\n'
             f'  <BuildConfiguration modelIdentifier="{identifier}" description="links the SUNDIALS 7 libraries '

@@ -15,9 +15,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from xml.sax.saxutils import quoteattr
 
-from ...numeric.reactions import REACTION_UNITS
+from ...model.modelfile.units import si_unit
 
-__all__ = ["Variable", "Layout", "SETTINGS", "ENERGIES", "model_description", "UNIT_EXPONENTS"]
+__all__ = ["Variable", "Layout", "SETTINGS", "ENERGIES", "model_description", "base_unit"]
 
 #: The settings of the integration exported as parameters: name, start value, description.
 SETTINGS = (("kronlag.alpha", "Baumgarte alpha of the index-1 ODE (1/s)"),
@@ -28,10 +28,26 @@ SETTINGS = (("kronlag.alpha", "Baumgarte alpha of the index-1 ODE (1/s)"),
 #: The energy outputs, in the order of the C outputs.
 ENERGIES = ("kinetic_energy", "potential_energy", "energy")
 
-#: SI base-unit exponents of the units the outputs use.
-UNIT_EXPONENTS = {REACTION_UNITS["force"]: {"kg": 1, "m": 1, "s": -2},
-                  REACTION_UNITS["couple"]: {"kg": 1, "m": 2, "s": -2},
-                  "J": {"kg": 1, "m": 2, "s": -2}}
+#: The FMI base units by pint's dimension.
+_BASE_UNITS = {"[mass]": "kg", "[length]": "m", "[time]": "s", "[current]": "A", "[temperature]": "K",
+               "[substance]": "mol", "[luminosity]": "cd"}
+
+
+def base_unit(text: str) -> dict[str, float] | None:
+    """The attributes of FMI's ``BaseUnit`` for the unit ``text`` (SI exponents, ``rad`` for an angle,
+    ``factor``), or None when pint does not know it."""
+    try:
+        one, _ = si_unit(text)
+    except ValueError:
+        return None
+    exponents = {_BASE_UNITS[dimension]: power for dimension, power in one.dimensionality.items()
+                 if dimension in _BASE_UNITS}
+    if len(exponents) < len(one.dimensionality):
+        return None
+    if "rad" in text.replace(" ", "").split("/")[0].split("*"):
+        exponents["rad"] = 1
+    factor = float(one.magnitude)
+    return exponents | ({"factor": factor} if factor != 1.0 else {})
 
 
 @dataclass(frozen=True)
@@ -92,12 +108,15 @@ class Layout:
                   units: Mapping[str, str], reaction_units: Mapping[str, str]) -> list[Variable]:
         """Every variable, in value-reference order."""
         offsets, m = self.offsets, self.m
+        unit_of = [units.get(name) for name in self.coordinates]
+        state_units = unit_of + [f"{unit}/s" if unit else None for unit in unit_of]
+        rate_units = state_units[m:] + [f"{unit}/s^2" if unit else None for unit in unit_of]
         variables = [Variable(name, k, "output", "continuous", "approx", float(start_state[k]),
-                              "coordinate (start: projected onto the constraints)" if k < m else "speed",
-                              units.get(name))
-                     for k, name in enumerate(self.coordinates + self.speeds)]
+                              "coordinate (start: projected onto the constraints)" if k < m else "speed", unit)
+                     for k, (name, unit) in enumerate(zip(self.coordinates + self.speeds, state_units))]
         variables += [Variable(f"der({name})", offsets["derivatives"] + k, "local", "continuous", "calculated",
-                               derivative=k) for k, name in enumerate(self.coordinates + self.speeds)]
+                               unit=unit, derivative=k)
+                      for k, (name, unit) in enumerate(zip(self.coordinates + self.speeds, rate_units))]
         for k, (name, value) in enumerate(zip(self.parameters, parameter_values)):
             reference = offsets["parameters"] + k
             if name in calculated:
@@ -113,7 +132,7 @@ class Layout:
         variables += [Variable(name, offsets["settings"] + k, "parameter", "fixed", "exact", float(value), text)
                       for k, ((name, text), value) in enumerate(zip(SETTINGS, settings))]
         outputs = self.multipliers + self.reactions + ENERGIES
-        output_units = {**reaction_units, **{name: "J" for name in ENERGIES}}
+        output_units = {**reaction_units, **dict.fromkeys(ENERGIES, units.get("energy", "J"))}
         variables += [Variable(name, offsets["outputs"] + k, "output", "continuous", "calculated",
                                unit=output_units.get(name)) for k, name in enumerate(outputs)]
         return variables
@@ -127,7 +146,7 @@ def _scalar_variable(variable: Variable) -> str:
     if variable.description:
         attributes.append(f"description={quoteattr(variable.description)}")
     real = []
-    if variable.unit in UNIT_EXPONENTS:
+    if variable.unit and base_unit(variable.unit) is not None:
         real.append(f"unit={quoteattr(variable.unit)}")
     if variable.start is not None:
         real.append(f'start="{variable.start!r}"')
@@ -136,12 +155,15 @@ def _scalar_variable(variable: Variable) -> str:
     return f"    <ScalarVariable {' '.join(attributes)}>\n      <Real {' '.join(real)}/>\n    </ScalarVariable>"
 
 
-def _unit_definitions() -> str:
+def _unit_definitions(variables: Sequence[Variable]) -> str:
+    """``UnitDefinitions`` of the units the variables use (none: the element left out)."""
+    used = sorted({variable.unit for variable in variables if variable.unit and base_unit(variable.unit)})
     lines = []
-    for name, exponents in UNIT_EXPONENTS.items():
-        base = " ".join(f'{unit}="{power}"' for unit, power in exponents.items())
+    for name in used:
+        base = " ".join(f'{key}="{value!r}"' if key == "factor" else f'{key}="{round(value)}"'
+                        for key, value in base_unit(name).items())
         lines.append(f"    <Unit name={quoteattr(name)}><BaseUnit {base}/></Unit>\n")
-    return f"  <UnitDefinitions>\n{''.join(lines)}  </UnitDefinitions>\n"
+    return f"  <UnitDefinitions>\n{''.join(lines)}  </UnitDefinitions>\n" if lines else ""
 
 
 def model_description(*, model_name: str, identifier: str, guid: str, description: str, tool: str, date: str,
@@ -174,7 +196,7 @@ def model_description(*, model_name: str, identifier: str, guid: str, descriptio
         f'description={quoteattr(description)} generationTool={quoteattr(tool)} generationDateAndTime="{date}" '
         f'variableNamingConvention="flat" numberOfEventIndicators="0">\n'
         + "".join(interfaces[kind] for kind in ("model-exchange", "co-simulation") if kind in kinds)
-        + _unit_definitions()
+        + _unit_definitions(variables)
         + '  <LogCategories>\n    <Category name="logStatusError"/>\n  </LogCategories>\n'
         f'  <DefaultExperiment startTime="0.0" stopTime="{float(stop_time)!r}" tolerance="{float(tolerance)!r}"/>\n'
         '  <ModelVariables>\n' + "\n".join(map(_scalar_variable, variables)) + '\n  </ModelVariables>\n'
