@@ -25,16 +25,13 @@ import sympy as sp
 from ...core.errors import CompilerError, InputError
 from ...numeric import codegen
 from ...numeric.reactions import multiplier_labels
-from .build import PLATFORM, build_description, c_source, compile_fmu, reactions, temporary_directory
-from .description import Layout, model_description
+from .build import STANDARDS, build_description, c_source, compile_fmu, reactions, temporary_directory
+from .description import KINDS, Layout, model_description
 
 if TYPE_CHECKING:
     from ...numeric.numeric_model import NumericModel
 
 __all__ = ["export_fmu", "KINDS", "input_parameters"]
-
-#: The FMI interfaces an FMU can provide (both by default).
-KINDS = ("model-exchange", "co-simulation")
 
 #: The matrices an input parameter must not enter (it may enter the generalized forces ``f_Q`` only).
 _NOT_IN_INPUTS = ("M", "Cqd", "g", "Phi", "A", "b")
@@ -189,9 +186,9 @@ def export_fmu(model: NumericModel, path: str | Path, *, q0=None, qd0=None, inpu
     CompilerError
         No C compiler, or it failed.
     """
-    if fmi_version != "2.0":
-        raise InputError(f"fmi_version={fmi_version!r}: kronlag writes FMI 2.0 FMUs only (FMI 3.0 is not "
-                         "implemented yet)")
+    if fmi_version not in STANDARDS:
+        raise InputError(f"fmi_version={fmi_version!r}: kronlag writes FMI {' and '.join(STANDARDS)} FMUs")
+    standard = STANDARDS[fmi_version]
     target = Path(path)
     if target.suffix != ".fmu":
         raise InputError(f"{target}: an FMU file name ends with .fmu")
@@ -218,23 +215,23 @@ def export_fmu(model: NumericModel, path: str | Path, *, q0=None, qd0=None, inpu
     reactions_code, reaction_names, reaction_units = reactions(model)
     layout = Layout(tuple(model.coordinate_names), speeds, tuple(model.parameter_names),
                     tuple(multiplier_labels(system, with_units=False)), tuple(reaction_names))
-    source = c_source(model, layout_macros=layout.c_macros(), reactions_code=reactions_code, guid=guid,
+    source = c_source(model, standard, layout_macros=layout.c_macros(), reactions_code=reactions_code, guid=guid,
                       start_state=start, calculated=calculated, settings=settings, rtol=tolerance,
                       max_steps=_MAX_STEPS)
     variables = layout.variables(start_state=start, parameter_values=model.parameter_vector(),
                                  calculated=calculated, inputs=input_names, settings=settings, units=units or {},
-                                 reaction_units=reaction_units)
+                                 reaction_units=reaction_units, independent_time=standard.version == "3.0")
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-    description = model_description(model_name=system.name, identifier=identifier, guid=guid,
+    description = model_description(standard.version, model_name=system.name, identifier=identifier, guid=guid,
                                     description=f"{system.name}: kronlag multibody model", tool=tool, date=now,
                                     variables=variables, source_file=f"{identifier}.c", stop_time=stop_time,
                                     tolerance=tolerance, kinds=chosen_kinds)
     with temporary_directory() as work:
         root = Path(work)
-        binaries = root / "binaries" / PLATFORM
-        compile_fmu(source, identifier, binaries, root / "sources")
+        binaries = root / "binaries" / standard.platform
+        compile_fmu(source, standard, identifier, binaries, root / "sources")
         libraries = [library.name for library in sorted(binaries.iterdir()) if library.name != f"{identifier}.so"]
-        (root / "sources" / "buildDescription.xml").write_text(build_description(identifier, libraries))
+        (root / "sources" / "buildDescription.xml").write_text(build_description(identifier, libraries, standard))
         (root / "modelDescription.xml").write_text(description)
         target.parent.mkdir(parents=True, exist_ok=True)
         with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as archive:

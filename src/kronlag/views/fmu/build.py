@@ -4,10 +4,10 @@ The source is the numeric model's generated C (:attr:`NumericModel.c_source` wit
 ``potential_energy`` and ``Phi_q`` kernels), the compiled integrators' declarations and C of
 :mod:`kronlag.simulation` up to ``cvode.c`` (as :func:`kronlag.simulation.drivers.driver` builds
 them), the FMU header generated here (value references, start values, the parameter definitions,
-the joint reactions) and ``c/fmu2.c``, the FMI 2.0 functions.  It compiles against the FMI 2.0
-headers that FMPy ships (``fmpy/c-code``) and links the SUNDIALS libraries of the scikit-sundae
-wheel, which go into ``binaries/<platform>/`` next to the FMU's library (found there through the
-run path ``$ORIGIN``).
+the joint reactions), ``c/fmu_core.c`` (the model instance) and ``c/fmu2.c`` or ``c/fmu3.c``, the
+FMI 2.0 or 3.0 functions.  It compiles against the FMI headers that FMPy ships (``fmpy/c-code``)
+and links the SUNDIALS libraries of the scikit-sundae wheel, which go into ``binaries/<platform>/``
+next to the FMU's library (found there through the run path ``$ORIGIN``).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import subprocess
 import sys
 import tempfile
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -32,14 +33,25 @@ from ...simulation import drivers
 from ...simulation.interface import c_declarations
 from ...simulation.solvers.compiled import CompiledSolver
 
-__all__ = ["FMI2_HEADERS", "PLATFORM", "fmi2_header_directory", "reactions", "c_source", "compile_fmu",
+__all__ = ["Standard", "STANDARDS", "header_directory", "reactions", "c_source", "compile_fmu",
            "build_description"]
 
-#: The FMI 2.0 headers the source includes (taken from FMPy's package data).
-FMI2_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+@dataclass(frozen=True)
+class Standard:
+    """What differs between the FMI versions kronlag writes: the headers the source includes (taken
+    from FMPy's package data), the platform folder of the binary and the C of the FMI functions."""
 
-#: The FMI platform folder of this machine (only 64-bit Linux is built).
-PLATFORM = "linux64"
+    version: str
+    headers: tuple[str, ...]
+    platform: str
+    functions: str
+
+
+#: The FMI versions by ``fmi_version`` (64-bit Linux binaries only).
+STANDARDS = {"2.0": Standard("2.0", ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"), "linux64",
+                             "fmu2.c"),
+             "3.0": Standard("3.0", ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h"),
+                             "x86_64-linux", "fmu3.c")}
 
 #: Co-simulation's absolute tolerance over its relative one (that of kronlag.simulate's defaults,
 #: rtol 1e-8 and atol 1e-10).
@@ -54,16 +66,17 @@ def _check_platform() -> None:
                          "sources could be compiled elsewhere, but kronlag does not do it yet")
 
 
-def fmi2_header_directory() -> Path:
-    """The directory of the FMI 2.0 headers that FMPy ships; InputError if FMPy is not installed."""
+def header_directory(standard: Standard) -> Path:
+    """The directory of the FMI headers that FMPy ships; InputError if FMPy is not installed."""
     spec = importlib.util.find_spec("fmpy")
     if spec is None or spec.origin is None:
-        raise InputError("FMU export needs the FMI 2.0 headers that FMPy ships: pip install kronlag[fmu]")
+        raise InputError(f"FMU export needs the FMI {standard.version} headers that FMPy ships: "
+                         "pip install kronlag[fmu]")
     directory = Path(spec.origin).parent / "c-code"
-    missing = [name for name in FMI2_HEADERS if not (directory / name).is_file()]
+    missing = [name for name in standard.headers if not (directory / name).is_file()]
     if missing:
-        raise InputError(f"FMU export: the FMPy installed lacks the FMI 2.0 header(s) {', '.join(missing)} "
-                         f"in {directory}")
+        raise InputError(f"FMU export: the FMPy installed lacks the FMI {standard.version} header(s) "
+                         f"{', '.join(missing)} in {directory}")
     return directory
 
 
@@ -113,8 +126,9 @@ def reactions(model) -> tuple[str, list[str], dict[str, str]]:
     return code + body, names, units
 
 
-def c_source(model, *, layout_macros: str, reactions_code: str, guid: str, start_state: np.ndarray,
-             calculated: Sequence[str], settings: Sequence[float], rtol: float, max_steps: int) -> str:
+def c_source(model, standard: Standard, *, layout_macros: str, reactions_code: str, guid: str,
+             start_state: np.ndarray, calculated: Sequence[str], settings: Sequence[float], rtol: float,
+             max_steps: int) -> str:
     """The FMU's C source (see the module docstring); ``reactions_code`` from :func:`reactions`."""
     names = model.parameter_names
     alpha, beta, drift = settings
@@ -133,8 +147,12 @@ def c_source(model, *, layout_macros: str, reactions_code: str, guid: str, start
     source = (model.c_source + model.c_kernels(*drivers.DRIVERS["cvode"].kernels) + c_declarations()
               + drivers._c_file("monitor.c") + drivers._c_file("progress.c") + drivers._c_file("cvode.c")
               + "\n".join(header) + "\n" + layout_macros + _definitions(names, model.parameter_definitions())
-              + reactions_code + (Path(__file__).with_name("c") / "fmu2.c").read_text())
+              + reactions_code + _c_file("fmu_core.c") + _c_file(standard.functions))
     return source
+
+
+def _c_file(name: str) -> str:
+    return (Path(__file__).with_name("c") / name).read_text()
 
 
 def _compiler() -> list[str]:
@@ -144,16 +162,16 @@ def _compiler() -> list[str]:
     return [compiler] if isinstance(compiler, str) else list(compiler)
 
 
-def compile_fmu(source: str, identifier: str, binaries: Path, sources: Path) -> None:
+def compile_fmu(source: str, standard: Standard, identifier: str, binaries: Path, sources: Path) -> None:
     """Write ``source`` and the FMI headers to ``sources``, compile ``binaries/<identifier>.so`` with
     the SUNDIALS libraries copied next to it (run path ``$ORIGIN``)."""
     _check_platform()
-    headers = fmi2_header_directory()
+    headers = header_directory(standard)
     compiler = _compiler()
     sources.mkdir(parents=True, exist_ok=True)
     binaries.mkdir(parents=True, exist_ok=True)
     (sources / f"{identifier}.c").write_text(source)
-    for name in FMI2_HEADERS:
+    for name in standard.headers:
         shutil.copyfile(headers / name, sources / name)
     libraries = []
     for library in drivers.sundials_libraries():
@@ -170,7 +188,7 @@ def compile_fmu(source: str, identifier: str, binaries: Path, sources: Path) -> 
                             f"{result.stderr[-4000:]}".rstrip())
 
 
-def build_description(identifier: str, libraries: Sequence[str]) -> str:
+def build_description(identifier: str, libraries: Sequence[str], standard: Standard) -> str:
     """``sources/buildDescription.xml`` (the FMI 3.0 format, which FMI 2.0.4 allows for source FMUs):
     the source file and the SUNDIALS libraries (file names ``lib<name>[-<hash>].so.<version>``)."""
     links = []
@@ -178,12 +196,12 @@ def build_description(identifier: str, libraries: Sequence[str]) -> str:
         match = re.fullmatch(r"lib(\w+?)(?:-[0-9a-f]+)?\.so\.([\d.]+)", file)
         name, release = match.groups() if match else (file, "")
         links.append(f'    <Library name="{name}"{f" version={quoteattr(release)}" if release else ""} '
-                     f'description={quoteattr(f"binaries/{PLATFORM}/{file}")}/>\n')
+                     f'description={quoteattr(f"binaries/{standard.platform}/{file}")}/>\n')
     links = "".join(links)
     return ('<?xml version="1.0" encoding="UTF-8"?>\n'
             '<fmiBuildDescription fmiVersion="3.0">\n'
             f'  <BuildConfiguration modelIdentifier="{identifier}" description="links the SUNDIALS 7 libraries '
-            f'shipped in binaries/{PLATFORM}/ (or any SUNDIALS 7 build)">\n'
+            f'shipped in binaries/{standard.platform}/ (or any SUNDIALS 7 build)">\n'
             '    <SourceFileSet language="C99">\n'
             f'      <SourceFile name="{identifier}.c"/>\n'
             '    </SourceFileSet>\n'

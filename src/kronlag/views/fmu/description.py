@@ -17,13 +17,16 @@ from xml.sax.saxutils import quoteattr
 
 from ...model.modelfile.units import si_unit
 
-__all__ = ["Variable", "Layout", "SETTINGS", "ENERGIES", "model_description", "base_unit"]
+__all__ = ["Variable", "Layout", "KINDS", "SETTINGS", "ENERGIES", "model_description", "base_unit"]
 
 #: The settings of the integration exported as parameters: name, start value, description.
 SETTINGS = (("kronlag.alpha", "Baumgarte alpha of the index-1 ODE (1/s)"),
             ("kronlag.beta", "Baumgarte beta of the index-1 ODE (1/s)"),
             ("kronlag.drift_tolerance", "largest constraint residual before a step event projects the states "
                                         "(model exchange)"))
+
+#: The FMI interfaces an FMU can provide, in the order of the model description.
+KINDS = ("model-exchange", "co-simulation")
 
 #: The energy outputs, in the order of the C outputs.
 ENERGIES = ("kinetic_energy", "potential_energy", "energy")
@@ -98,6 +101,7 @@ class Layout:
                  f"#define KL_VR_ALPHA {settings}", f"#define KL_VR_BETA {settings + 1}",
                  f"#define KL_VR_DRIFT_TOLERANCE {settings + 2}",
                  f"#define KL_VR_OUTPUTS {offsets['outputs']}", f"#define KL_VR_COUNT {offsets['count']}",
+                 f"#define KL_VR_TIME {offsets['count']}",
                  f"#define KL_VR_OUTPUTS_COUNT {offsets['count'] - offsets['outputs']}",
                  "#define KL_OUT_LAMBDA 0", f"#define KL_OUT_REACTIONS {len(self.multipliers)}",
                  f"#define KL_OUT_ENERGY {len(self.multipliers) + len(self.reactions)}"]
@@ -105,8 +109,9 @@ class Layout:
 
     def variables(self, *, start_state: Sequence[float], parameter_values: Sequence[float],
                   calculated: Sequence[str], inputs: Sequence[str], settings: Sequence[float],
-                  units: Mapping[str, str], reaction_units: Mapping[str, str]) -> list[Variable]:
-        """Every variable, in value-reference order."""
+                  units: Mapping[str, str], reaction_units: Mapping[str, str],
+                  independent_time: bool = False) -> list[Variable]:
+        """Every variable, in value-reference order (with ``independent_time``, FMI 3.0's ``time`` last)."""
         offsets, m = self.offsets, self.m
         unit_of = [units.get(name) for name in self.coordinates]
         state_units = unit_of + [f"{unit}/s" if unit else None for unit in unit_of]
@@ -135,6 +140,9 @@ class Layout:
         output_units = {**reaction_units, **dict.fromkeys(ENERGIES, units.get("energy", "J"))}
         variables += [Variable(name, offsets["outputs"] + k, "output", "continuous", "calculated",
                                unit=output_units.get(name)) for k, name in enumerate(outputs)]
+        if independent_time:
+            variables.append(Variable("time", offsets["count"], "independent", "continuous",
+                                      description="simulation time", unit=units.get("t")))
         return variables
 
 
@@ -166,23 +174,69 @@ def _unit_definitions(variables: Sequence[Variable]) -> str:
     return f"  <UnitDefinitions>\n{''.join(lines)}  </UnitDefinitions>\n" if lines else ""
 
 
-def model_description(*, model_name: str, identifier: str, guid: str, description: str, tool: str, date: str,
-                      variables: Sequence[Variable], source_file: str, stop_time: float, tolerance: float,
-                      kinds: Sequence[str]) -> str:
-    """The ``modelDescription.xml`` of an FMU with the interfaces ``kinds`` ("model-exchange",
-    "co-simulation") in one binary."""
+def _structure(variables: Sequence[Variable]) -> tuple[list[Variable], list[Variable], list[Variable]]:
+    """The outputs, the state derivatives and the initial unknowns (outputs and states computed at
+    initialization, the calculated parameters, the derivatives), each in the order of the variables."""
+    outputs = [v for v in variables if v.causality == "output"]
+    derivatives = [v for v in variables if v.derivative is not None]
+    initial = [v for v in variables if (v.causality == "output" and v.initial in ("approx", "calculated"))
+               or v.causality == "calculatedParameter" or v.derivative is not None]
+    return outputs, derivatives, initial
+
+
+def _float64(variable: Variable) -> str:
+    """An FMI 3.0 ``Float64`` variable."""
+    attributes = [f"name={quoteattr(variable.name)}", f'valueReference="{variable.reference}"',
+                  f'causality="{variable.causality}"', f'variability="{variable.variability}"']
+    if variable.initial:
+        attributes.append(f'initial="{variable.initial}"')
+    if variable.description:
+        attributes.append(f"description={quoteattr(variable.description)}")
+    if variable.unit and base_unit(variable.unit) is not None:
+        attributes.append(f"unit={quoteattr(variable.unit)}")
+    if variable.start is not None:
+        attributes.append(f'start="{variable.start!r}"')
+    if variable.derivative is not None:
+        attributes.append(f'derivative="{variable.derivative}"')  # the state's value reference
+    return f"    <Float64 {' '.join(attributes)}/>"
+
+
+def model_description(version: str, *, model_name: str, identifier: str, guid: str, description: str, tool: str,
+                      date: str, variables: Sequence[Variable], source_file: str, stop_time: float,
+                      tolerance: float, kinds: Sequence[str]) -> str:
+    """The ``modelDescription.xml`` (FMI ``version`` "2.0" or "3.0") of an FMU with the interfaces
+    ``kinds`` ("model-exchange", "co-simulation") in one binary."""
+    outputs, derivatives, initial = _structure(variables)
+    experiment = (f'  <DefaultExperiment startTime="0.0" stopTime="{float(stop_time)!r}" '
+                  f'tolerance="{float(tolerance)!r}"/>\n')
+    categories = '  <LogCategories>\n    <Category name="logStatusError"/>\n  </LogCategories>\n'
+    header = (f'<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription fmiVersion="{version}" '
+              f'modelName={quoteattr(model_name)} {"guid" if version == "2.0" else "instantiationToken"}="{guid}" '
+              f'description={quoteattr(description)} generationTool={quoteattr(tool)} '
+              f'generationDateAndTime="{date}" variableNamingConvention="flat"')
+    if version == "3.0":
+        interfaces = {
+            "model-exchange": f'  <ModelExchange modelIdentifier="{identifier}" canGetAndSetFMUState="false" '
+                              'canSerializeFMUState="false" providesDirectionalDerivatives="false" '
+                              'needsCompletedIntegratorStep="true"/>\n',
+            "co-simulation": f'  <CoSimulation modelIdentifier="{identifier}" canGetAndSetFMUState="false" '
+                             'canSerializeFMUState="false" providesDirectionalDerivatives="false" '
+                             'canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="0" '
+                             'hasEventMode="false" providesIntermediateUpdate="false"/>\n'}
+        structure = "".join(f'    <{element} valueReference="{v.reference}"/>\n'
+                            for element, chosen in (("Output", outputs), ("ContinuousStateDerivative", derivatives),
+                                                    ("InitialUnknown", initial)) for v in chosen)
+        return (header + '>\n' + "".join(interfaces[kind] for kind in KINDS if kind in kinds)
+                + _unit_definitions(variables) + categories + experiment
+                + '  <ModelVariables>\n' + "\n".join(map(_float64, variables)) + '\n  </ModelVariables>\n'
+                + f'  <ModelStructure>\n{structure}  </ModelStructure>\n</fmiModelDescription>\n')
     sources = f'\n    <SourceFiles>\n      <File name={quoteattr(source_file)}/>\n    </SourceFiles>\n  '
-    common = ('canNotUseMemoryManagementFunctions="false" canGetAndSetFMUstate="false" '
+    common = ('canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="false" '
               'canSerializeFMUstate="false" providesDirectionalDerivative="false"')
     index = {variable.reference: k + 1 for k, variable in enumerate(variables)}  # 1-based
-    outputs = [index[v.reference] for v in variables if v.causality == "output"]
-    derivatives = [index[v.reference] for v in variables if v.derivative is not None]
-    initial = sorted(index[v.reference] for v in variables
-                     if (v.causality == "output" and v.initial in ("approx", "calculated"))
-                     or v.causality == "calculatedParameter" or v.derivative is not None)
 
-    def unknowns(indices: Sequence[int]) -> str:
-        return "".join(f'      <Unknown index="{k}"/>\n' for k in indices)
+    def unknowns(chosen: Sequence[Variable]) -> str:
+        return "".join(f'      <Unknown index="{index[v.reference]}"/>\n' for v in chosen)
 
     interfaces = {
         "model-exchange": f'  <ModelExchange modelIdentifier="{identifier}" {common} '
@@ -191,15 +245,10 @@ def model_description(*, model_name: str, identifier: str, guid: str, descriptio
                          'canHandleVariableCommunicationStepSize="true" canInterpolateInputs="false" '
                          f'maxOutputDerivativeOrder="0" canRunAsynchronuously="false">{sources}</CoSimulation>\n'}
     return (
-        '<?xml version="1.0" encoding="UTF-8"?>\n'
-        f'<fmiModelDescription fmiVersion="2.0" modelName={quoteattr(model_name)} guid="{guid}" '
-        f'description={quoteattr(description)} generationTool={quoteattr(tool)} generationDateAndTime="{date}" '
-        f'variableNamingConvention="flat" numberOfEventIndicators="0">\n'
-        + "".join(interfaces[kind] for kind in ("model-exchange", "co-simulation") if kind in kinds)
-        + _unit_definitions(variables)
-        + '  <LogCategories>\n    <Category name="logStatusError"/>\n  </LogCategories>\n'
-        f'  <DefaultExperiment startTime="0.0" stopTime="{float(stop_time)!r}" tolerance="{float(tolerance)!r}"/>\n'
-        '  <ModelVariables>\n' + "\n".join(map(_scalar_variable, variables)) + '\n  </ModelVariables>\n'
+        header + ' numberOfEventIndicators="0">\n'
+        + "".join(interfaces[kind] for kind in KINDS if kind in kinds)
+        + _unit_definitions(variables) + categories + experiment
+        + '  <ModelVariables>\n' + "\n".join(map(_scalar_variable, variables)) + '\n  </ModelVariables>\n'
         '  <ModelStructure>\n'
         f'    <Outputs>\n{unknowns(outputs)}    </Outputs>\n'
         f'    <Derivatives>\n{unknowns(derivatives)}    </Derivatives>\n'
