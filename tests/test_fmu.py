@@ -26,6 +26,9 @@ pytest.importorskip("fmpy.validation")
 
 pytestmark = pytest.mark.skipif(kronlag.numeric.codegen.c_compiler() is None, reason="needs a C compiler")
 
+#: The FMI versions written.
+VERSIONS = ("2.0", "3.0")
+
 #: Output grid and end of the comparisons.
 T_END, DT = 2.0, 0.01
 
@@ -61,13 +64,17 @@ def file_model(name: str):
 
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
-    """name -> (model, q0, qd0, FMU path) of the four-bar, the slider-crank and the five-bar (joints)."""
+    """name -> (model, q0, qd0, FMU path) of the four-bar, the slider-crank and the five-bar (joints),
+    FMI 2.0; the FMI 3.0 FMUs of the first two under ``<name>@3.0``."""
     directory = tmp_path_factory.mktemp("fmu")
     built = {}
-    for name in ("four_bar", "slider_crank", "five_bar"):
+    for name, versions in (("four_bar", VERSIONS), ("slider_crank", VERSIONS), ("five_bar", ("2.0",))):
         model, q0, qd0 = file_model(name)
-        path = kronlag.export_fmu(model, directory / f"{name}.fmu", q0=q0, qd0=qd0, stop_time=T_END)
-        built[name] = (model, q0, qd0, path)
+        for version in versions:
+            key = name if version == "2.0" else f"{name}@{version}"
+            path = kronlag.export_fmu(model, directory / f"{key}.fmu", q0=q0, qd0=qd0, stop_time=T_END,
+                                      fmi_version=version)
+            built[key] = (model, q0, qd0, path)
     return built
 
 
@@ -85,7 +92,7 @@ def q_error(result: dict[str, np.ndarray], trajectory) -> float:
     return float(np.max(np.abs(q - trajectory.q)))
 
 
-@pytest.mark.parametrize("name", ["four_bar", "slider_crank", "five_bar"])
+@pytest.mark.parametrize("name", ["four_bar", "slider_crank", "five_bar", "four_bar@3.0", "slider_crank@3.0"])
 def test_fmpy_validation_finds_no_problem(exported, name):
     from fmpy.validation import validate_fmu
 
@@ -166,10 +173,11 @@ def test_reaction_outputs_by_joint_name(exported):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("version", VERSIONS)
 @pytest.mark.parametrize("name", ["four_bar", "slider_crank"])
 @pytest.mark.parametrize("kind, tolerance", [("ModelExchange", 1e-12), ("CoSimulation", 1e-10)])
-def test_fmpy_simulation_agrees_with_kronlag(exported, name, kind, tolerance):
-    model, q0, qd0, path = exported[name]
+def test_fmpy_simulation_agrees_with_kronlag(exported, name, kind, tolerance, version):
+    model, q0, qd0, path = exported[name if version == "2.0" else f"{name}@{version}"]
     trajectory = reference(model, q0, qd0)
     result = fmpy_run(path, kind, [*model.coordinate_names, "energy"], tolerance=tolerance)
     assert q_error(result, trajectory) <= 1e-6
@@ -178,11 +186,12 @@ def test_fmpy_simulation_agrees_with_kronlag(exported, name, kind, tolerance):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("key", ["four_bar", "four_bar@3.0"])
 @pytest.mark.parametrize("kind, tolerance", [("ModelExchange", 1e-12), ("CoSimulation", 1e-10)])
-def test_parameter_and_input_set_through_fmpy_change_the_motion_as_in_kronlag(exported, kind, tolerance):
+def test_parameter_and_input_set_through_fmpy_change_the_motion_as_in_kronlag(exported, kind, tolerance, key):
     """A tunable parameter (the coupler's mass, which the calculated I2 follows) and the input tau set
     through FMPy move the four-bar as kronlag.simulate with those values does."""
-    model, q0, qd0, path = exported["four_bar"]
+    model, q0, qd0, path = exported[key]
     changed = {"m2": 4.0, "tau": 1.5}
     unchanged = reference(model, q0, qd0)
     trajectory = reference(model, q0, qd0, **changed)
@@ -201,6 +210,14 @@ def test_the_cli_exports_an_fmu(tmp_path, capsys):
     variables = {v.name: v for v in fmpy.read_model_description(str(target)).modelVariables}
     assert (variables["q1"].unit, variables["q1d"].unit, variables["x"].unit, variables["energy"].unit) \
         == ("rad", "rad/s", "m", "J")
+
+
+def test_the_cli_exports_an_fmi3_fmu(tmp_path, capsys):
+    target = tmp_path / "four_bar.fmu"
+    assert main(["export", "four_bar", "--fmu", str(target), "--fmi-version", "3.0"]) == 0
+    assert "FMI 3.0 FMU" in capsys.readouterr().out
+    description = fmpy.read_model_description(str(target))
+    assert description.fmiVersion == "3.0" and {"q1", "time", "energy"} <= {v.name for v in description.modelVariables}
 
 
 def test_export_needs_lang_or_fmu(capsys):
@@ -229,7 +246,7 @@ def test_start_off_the_constraints_is_refused(slider_crank_model, tmp_path):
         kronlag.export_fmu(model, tmp_path / "x.fmu", q0=q0 + 0.1, qd0=qd0)
 
 
-@pytest.mark.parametrize("options, message", [({"fmi_version": "3.0"}, "FMI 2.0 FMUs only"),
+@pytest.mark.parametrize("options, message", [({"fmi_version": "1.0"}, "writes FMI 2.0 and 3.0 FMUs"),
                                               ({"kinds": "hybrid"}, "kinds must be"),
                                               ({"inputs": ["nope"]}, "'nope' is not a parameter"),
                                               ({"inputs": ["I1"]}, "defined by an expression")])

@@ -175,8 +175,9 @@ def _export_fmu(arguments: argparse.Namespace) -> None:
     numeric = numeric_model(model)
     q0, qd0 = initial_state(model, numeric)
     path = export_fmu(numeric, arguments.fmu, q0=q0, qd0=qd0, stop_time=model.simulation.t_end,
-                      tolerance=model.simulation.rtol, units={**model.units, **model_units(model)})
-    print(f"{path}: FMI 2.0 FMU (model exchange and co-simulation) of {model.system.name!r}")
+                      tolerance=model.simulation.rtol, units={**model.units, **model_units(model)},
+                      fmi_version=arguments.fmi_version)
+    print(f"{path}: FMI {arguments.fmi_version} FMU (model exchange and co-simulation) of {model.system.name!r}")
 
 
 def _check(arguments: argparse.Namespace) -> None:
@@ -349,8 +350,10 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
     sub = command("export", _export, "write standalone code for M, C, g, Phi, Phi_q, Phi_t, gamma, A, b, f_Q, "
                   "or an FMU (--fmu)")
     sub.add_argument("--lang", choices=LANGUAGES, help="target language")
-    sub.add_argument("--fmu", metavar="FILE", help="write an FMI 2.0 FMU (model exchange and co-simulation, "
+    sub.add_argument("--fmu", metavar="FILE", help="write an FMU (model exchange and co-simulation, "
                      "compiled for this platform) instead of code; needs FMPy's FMI headers (pip install kronlag[fmu])")
+    sub.add_argument("--fmi-version", choices=("2.0", "3.0"), default="2.0", help="FMI version of --fmu "
+                     "(default: 2.0)")
     sub.add_argument("--simplify", action="store_true", help="apply trigsimp to every entry first")
     sub.add_argument("--output", metavar="FILE", help="write to FILE instead of standard output")
 

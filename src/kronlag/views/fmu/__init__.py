@@ -1,8 +1,8 @@
-"""FMU export: a numeric model as a Functional Mock-up Unit (FMI 2.0, Model Exchange and
+"""FMU export: a numeric model as a Functional Mock-up Unit (FMI 2.0 or 3.0, Model Exchange and
 Co-Simulation in one binary), for Simulink, Dymola, OpenModelica, FMPy and other importers.
 
 :func:`export_fmu` writes ``<modelIdentifier>.fmu``: ``modelDescription.xml`` (:mod:`.description`),
-``binaries/linux64/<modelIdentifier>.so`` compiled here from the model's generated C with the SUNDIALS
+``binaries/<platform>/<modelIdentifier>.so`` compiled here from the model's generated C with the SUNDIALS
 libraries it links next to it, and ``sources/`` with that C, the FMI headers and
 ``buildDescription.xml`` (:mod:`.build`).  ``docs/fmu.md`` lists what is exported.
 """
@@ -132,7 +132,7 @@ def export_fmu(model: NumericModel, path: str | Path, *, q0=None, qd0=None, inpu
                tolerance: float = 1e-8, alpha: float = 10.0, beta: float = 10.0,
                drift_tolerance: float = 1e-6, model_identifier: str | None = None,
                units: Mapping[str, str] | None = None) -> Path:
-    """Write ``model`` as an FMU (FMI 2.0) compiled for this platform.
+    """Write ``model`` as an FMU (FMI 2.0 or 3.0) compiled for this platform.
 
     The FMU has the states ``q`` and ``qd`` (outputs; start values ``q0``, ``qd0``, projected onto the
     constraints when initialization ends), every parameter (tunable; those defined by an expression of
@@ -155,8 +155,7 @@ def export_fmu(model: NumericModel, path: str | Path, *, q0=None, qd0=None, inpu
     inputs : iterable of str, optional
         The parameters that become FMU inputs; by default :func:`input_parameters`, those entering
         only the generalized forces.
-    fmi_version : {"2.0"}
-        FMI 3.0 is not written yet.
+    fmi_version : {"2.0", "3.0"}
     kinds : "model-exchange", "co-simulation" or both (the default)
     stop_time, tolerance : float
         The ``DefaultExperiment``; ``tolerance`` is also co-simulation's relative tolerance when the

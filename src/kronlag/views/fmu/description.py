@@ -1,4 +1,4 @@
-"""The variables of a kronlag FMU and its ``modelDescription.xml`` (FMI 2.0).
+"""The variables of a kronlag FMU and its ``modelDescription.xml`` (FMI 2.0 or 3.0).
 
 Value references, one block after the other (:class:`Layout`): the states ``q`` and ``qd``
 (outputs), their derivatives, every model parameter (in the order of the parameter vector ``p``:
@@ -6,7 +6,8 @@ tunable parameters, the defined ones as calculated parameters, the input paramet
 the three settings of the integration (Baumgarte's ``alpha`` and ``beta``, the drift tolerance),
 then the outputs: the multipliers ``lambda[<constraint>]``, the joint reactions
 ``<joint>.F<axis>`` and ``<joint>.M<axis>`` and the energies.  The C side reads the same blocks
-from the macros :meth:`Layout.c_macros` prints (``kronlag/views/fmu/c/fmu2.c``).
+from the macros :meth:`Layout.c_macros` prints (``kronlag/views/fmu/c/fmu_core.c``); FMI 3.0 adds the
+independent variable ``time`` after the last.
 """
 
 from __future__ import annotations
