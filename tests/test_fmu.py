@@ -200,6 +200,68 @@ def test_parameter_and_input_set_through_fmpy_change_the_motion_as_in_kronlag(ex
     assert q_error(result, trajectory) <= 1e-6
 
 
+#: The child process: the FMU's co-simulation stepped by hand through FMPy's FMU2Slave, the input
+#: tau set to 0 until T_END / 2, then to 1.5; prints q at the communication points as JSON.
+_STEP_INPUT = """
+import json, shutil, sys
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+path, names = sys.argv[1], json.loads(sys.argv[2])
+description = read_model_description(path)
+reference = {variable.name: variable.valueReference for variable in description.modelVariables}
+directory = extract(path)
+slave = FMU2Slave(guid=description.guid, unzipDirectory=directory,
+                  modelIdentifier=description.coSimulation.modelIdentifier, instanceName="step")
+slave.instantiate()
+slave.setupExperiment(tolerance=1e-10, startTime=0.0)
+slave.enterInitializationMode()
+slave.exitInitializationMode()
+rows, t = [], 0.0
+for k in range(%d):
+    slave.setReal([reference["tau"]], [0.0 if t < %r - 1e-12 else 1.5])
+    slave.doStep(currentCommunicationPoint=t, communicationStepSize=%r)
+    t = (k + 1) * %r
+    rows.append([t] + slave.getReal([reference[name] for name in names]))
+slave.terminate()
+slave.freeInstance()
+shutil.rmtree(directory, ignore_errors=True)
+assert "kronlag" not in sys.modules
+print(json.dumps(rows))
+""" % (round(T_END / DT), T_END / 2, DT, DT)
+
+
+@pytest.mark.slow
+def test_an_input_changed_between_co_simulation_steps(exported):
+    """The input tau switched from 0 to 1.5 halfway restarts the FMU's CVODE there: the motion is
+    kronlag.simulate's with tau = 0, then from its state at T_END / 2 with tau = 1.5."""
+    model, q0, qd0, path = exported["four_bar"]
+    names = list(model.coordinate_names)
+    done = subprocess.run([sys.executable, "-c", _STEP_INPUT, str(path), json.dumps(names)], capture_output=True,
+                          text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    rows = np.array(json.loads(done.stdout))
+    half = T_END / 2
+    first = kronlag.simulate(model, (0.0, half), q0, qd0, rtol=1e-10, atol=1e-12, t_eval=rows[rows[:, 0] <= half, 0])
+    pushed = model.with_parameters(tau=1.5)
+    second = kronlag.simulate(pushed, (half, T_END), first.q[-1], first.qd[-1], rtol=1e-10, atol=1e-12,
+                              t_eval=rows[rows[:, 0] > half + 1e-9, 0])
+    expected = np.vstack([first.q, second.q])
+    assert float(np.max(np.abs(rows[:, 1:] - expected))) <= 1e-6
+    assert float(np.max(np.abs(second.q[-1] - reference(model, q0, qd0).q[-1]))) > 1e-2  # the input mattered
+
+
+def test_a_model_with_the_python_backend_is_built_with_c(tmp_path):
+    from kronlag.app.workflows import initial_state
+
+    model_file = resolve_model("slider_crank")
+    model = kronlag.derive(model_file.system).numeric(model_file.values, backend="python")
+    q0, qd0 = initial_state(model_file, model)
+    path = kronlag.export_fmu(model, tmp_path / "python.fmu", q0=q0, qd0=qd0)
+    from fmpy.validation import validate_fmu
+
+    assert validate_fmu(str(path)) == []
+
+
 def test_the_cli_exports_an_fmu(tmp_path, capsys):
     target = tmp_path / "slider.fmu"
     assert main(["export", "slider_crank", "--fmu", str(target)]) == 0
