@@ -310,6 +310,8 @@ def test_start_off_the_constraints_is_refused(slider_crank_model, tmp_path):
 
 @pytest.mark.parametrize("options, message", [({"fmi_version": "1.0"}, "writes FMI 2.0 and 3.0 FMUs"),
                                               ({"kinds": "hybrid"}, "kinds must be"),
+                                              ({"tolerance": "tight"}, "tolerance must be a positive number"),
+                                              ({"alpha": -1.0}, "alpha must be a non-negative number"),
                                               ({"inputs": ["nope"]}, "'nope' is not a parameter"),
                                               ({"inputs": ["I1"]}, "defined by an expression")])
 def test_bad_options_are_refused(slider_crank_model, tmp_path, options, message):

@@ -120,10 +120,14 @@ def _kinds(kinds: Sequence[str] | str) -> tuple[str, ...]:
     return chosen
 
 
-def _positive(value: float, name: str) -> float:
-    number = float(value)
-    if not (np.isfinite(number) and number > 0):
-        raise InputError(f"{name} must be a positive number, got {value!r}")
+def _checked(value: float, name: str, *, zero: bool = False) -> float:
+    """``value`` as a finite float, positive (or zero with ``zero``); InputError naming ``name`` otherwise."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = float("nan")
+    if not (np.isfinite(number) and (number > 0 or (zero and number == 0))):
+        raise InputError(f"{name} must be a {'non-negative' if zero else 'positive'} number, got {value!r}")
     return number
 
 
@@ -192,9 +196,9 @@ def export_fmu(model: NumericModel, path: str | Path, *, q0=None, qd0=None, inpu
     if target.suffix != ".fmu":
         raise InputError(f"{target}: an FMU file name ends with .fmu")
     chosen_kinds = _kinds(kinds)
-    settings = tuple(_positive(value, name) for value, name in ((alpha, "alpha"), (beta, "beta"),
-                                                                (drift_tolerance, "drift_tolerance")))
-    tolerance, stop_time = _positive(tolerance, "tolerance"), _positive(stop_time, "stop_time")
+    settings = (_checked(alpha, "alpha", zero=True), _checked(beta, "beta", zero=True),
+                _checked(drift_tolerance, "drift_tolerance"))
+    tolerance, stop_time = _checked(tolerance, "tolerance"), _checked(stop_time, "stop_time")
     model = _c_model(model)
     start = _start_state(model, q0, qd0)
     input_names = _inputs(model, inputs)
