@@ -58,6 +58,7 @@ from .studies.linearization import LinearModel, linearize  # noqa: E402
 from .studies.sweeps import SweepResult, sweep  # noqa: E402
 from .symbolic.derivation import derive  # noqa: E402
 from .symbolic.equations import Equations  # noqa: E402
+from .views.fmu import export_fmu  # noqa: E402
 
 try:
     __version__ = version("kronlag")
@@ -110,6 +111,7 @@ __all__ = [
     "linearize",
     "sweep",
     "SweepResult",
+    "export_fmu",
     "KronlagError",
     "InputError",
     "ModelError",

@@ -26,9 +26,11 @@ from ..views.plotting import plot_inverse_dynamics, plot_kinematics
 from .outputs import PLOT_SUFFIXES, OutputKind, emit, finish_run, no_check, requested_outputs
 from .workflows import (
     check_model,
+    initial_state,
     inverse_dynamics_along,
     kinematics_along,
     model_units,
+    numeric_model,
     parse_drive,
     simulate_model,
     summarize,
@@ -162,8 +164,27 @@ def _derive(arguments: argparse.Namespace) -> None:
 
 
 def _export(arguments: argparse.Namespace) -> None:
+    if (arguments.lang is None) == (arguments.fmu is None):
+        raise InputError("export: give either --lang LANGUAGE (code) or --fmu FILE (an FMU)")
+    if arguments.fmu is not None:
+        _export_fmu(arguments)
+        return
     equations = derive(resolve_model(arguments.model).system, simplify=arguments.simplify)
     emit(export_code(equations, arguments.lang), arguments.output)
+
+
+def _export_fmu(arguments: argparse.Namespace) -> None:
+    """``export --fmu FILE``: :func:`kronlag.export_fmu` of the model with its file's parameter values,
+    assembled initial state, ``t_end`` and ``rtol``."""
+    from ..views.fmu import export_fmu
+
+    model = resolve_model(arguments.model)
+    numeric = numeric_model(model)
+    q0, qd0 = initial_state(model, numeric)
+    path = export_fmu(numeric, arguments.fmu, q0=q0, qd0=qd0, stop_time=model.simulation.t_end,
+                      tolerance=model.simulation.rtol, units={**model.units, **model_units(model)},
+                      fmi_version=arguments.fmi_version)
+    print(f"{path}: FMI {arguments.fmi_version} FMU (model exchange and co-simulation) of {model.system.name!r}")
 
 
 def _check(arguments: argparse.Namespace) -> None:
@@ -333,8 +354,13 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
     sub.add_argument("--simplify", action="store_true", help="apply trigsimp to every entry")
     sub.add_argument("--output", metavar="FILE", help="write to FILE instead of standard output")
 
-    sub = command("export", _export, "write standalone code for M, C, g, Phi, Phi_q, Phi_t, gamma, A, b, f_Q")
-    sub.add_argument("--lang", choices=LANGUAGES, required=True, help="target language")
+    sub = command("export", _export, "write standalone code for M, C, g, Phi, Phi_q, Phi_t, gamma, A, b, f_Q, "
+                  "or an FMU (--fmu)")
+    sub.add_argument("--lang", choices=LANGUAGES, help="target language")
+    sub.add_argument("--fmu", metavar="FILE", help="write an FMU (model exchange and co-simulation, "
+                     "compiled for this platform) instead of code; needs FMPy's FMI headers (pip install kronlag[fmu])")
+    sub.add_argument("--fmi-version", choices=("2.0", "3.0"), default="2.0", help="FMI version of --fmu "
+                     "(default: 2.0)")
     sub.add_argument("--simplify", action="store_true", help="apply trigsimp to every entry first")
     sub.add_argument("--output", metavar="FILE", help="write to FILE instead of standard output")
 

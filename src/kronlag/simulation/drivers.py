@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from ..numeric.numeric_model import NumericModel
 
 __all__ = ["DRIVERS", "Driver", "driver", "run", "Segment", "output_rows", "segment_status", "solution_of",
-           "require"]
+           "require", "sundials_libraries"]
 
 
 _SUNDIALS_LIBRARIES = ("sundials_core", "sundials_nvecserial", "sundials_sunmatrixdense",
@@ -49,17 +49,26 @@ _MAX_EVENTS = 1000
 _MAX_STEP_ROWS = 1_000_000
 
 
-def _load_sundials() -> None:
-    """Load the SUNDIALS shared libraries of the scikit-sundae wheel (``scikit_sundae.libs``)
-    with global symbols, so that the driver library resolves its SUNDIALS calls against them."""
+def sundials_libraries() -> list[Path]:
+    """The SUNDIALS shared libraries of the scikit-sundae wheel (``scikit_sundae.libs``) that CVODE
+    needs, each after those it depends on (also shipped inside an FMU, :mod:`kronlag.views.fmu`)."""
     import sksundae
 
     directory = Path(sksundae.__file__).resolve().parent.parent / "scikit_sundae.libs"
+    found = []
     for name in _SUNDIALS_LIBRARIES:
         matches = sorted(directory.glob(f"lib{name}-*.so*")) or sorted(directory.glob(f"lib{name}.so*"))
         if not matches:
             raise CompilerError(f"the compiled method needs lib{name} from scikit-sundae, not found in {directory}")
-        ctypes.CDLL(str(matches[0]), mode=ctypes.RTLD_GLOBAL)
+        found.append(matches[0])
+    return found
+
+
+def _load_sundials() -> None:
+    """Load :func:`sundials_libraries` with global symbols, so that the driver library resolves its
+    SUNDIALS calls against them."""
+    for path in sundials_libraries():
+        ctypes.CDLL(str(path), mode=ctypes.RTLD_GLOBAL)
 
 
 def _c_file(name: str) -> str:
