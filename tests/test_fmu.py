@@ -135,7 +135,7 @@ def test_the_shipped_sources_build_the_fmu_again(exported, tmp_path):
     libraries = sorted(str(file) for file in binaries.glob("libsundials_*"))
     built = tmp_path / "rebuilt.so"
     compiler = kronlag.numeric.codegen.c_compiler()
-    done = subprocess.run([compiler, "-O1", "-fPIC", "-shared", "-std=gnu99", f"-I{tmp_path / 'sources'}", "-o",
+    done = subprocess.run([*compiler.command, *compiler.flags, "-O1", "-fPIC", "-shared", "-std=gnu99", f"-I{tmp_path / 'sources'}", "-o",
                            str(built), str(tmp_path / "sources" / "four_bar.c"), *libraries,
                            f"-Wl,-rpath,{binaries}", "-lm"], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-2000:]

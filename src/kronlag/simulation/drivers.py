@@ -33,7 +33,7 @@ from .watch import LimitStop
 if TYPE_CHECKING:
     from ..numeric.numeric_model import NumericModel
 
-__all__ = ["DRIVERS", "Driver", "driver", "run", "Segment", "output_rows", "segment_status", "solution_of",
+__all__ = ["DRIVERS", "Driver", "driver", "driver_source", "run", "Segment", "output_rows", "segment_status", "solution_of",
            "require", "sundials_libraries"]
 
 
@@ -123,10 +123,17 @@ DRIVERS = {
 _LOADED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
+def driver_source(model: NumericModel, kind: str) -> str:
+    """The C source of the driver ``kind`` of :data:`DRIVERS` for ``model``: the model's C source, the
+    kernels, :func:`~.interface.c_declarations`, ``monitor.c``, ``progress.c``, ``limits.c``,
+    ``controller.c`` and the driver's file (also the core of an exported FMU)."""
+    spec = DRIVERS[kind]
+    return (model.c_source + model.c_kernels(*spec.kernels) + c_declarations() + _c_file("monitor.c")
+            + _c_file("progress.c") + _c_file("limits.c") + _c_file("controller.c") + _c_file(spec.file))
+
+
 def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
-    """The shared library of ``model`` with the driver ``kind`` of :data:`DRIVERS`: the model's C
-    source, the kernels, :func:`~.interface.c_declarations`, ``monitor.c``, ``progress.c``,
-    ``controller.c`` and the driver's file."""
+    """The shared library of ``model`` with the driver ``kind`` of :data:`DRIVERS` (:func:`driver_source`)."""
     if isinstance(model, ControlledModel):  # a run's view of a model: the model's own libraries
         model = model.loop.model
     libraries = _LOADED.setdefault(model, {})
@@ -134,9 +141,7 @@ def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
         spec = DRIVERS[kind]
         if spec.sundials:
             _load_sundials()
-        library = _driver_library(model.c_source + model.c_kernels(*spec.kernels) + c_declarations()
-                                  + _c_file("monitor.c") + _c_file("progress.c") + _c_file("limits.c")
-                                  + _c_file("controller.c") + _c_file(spec.file))
+        library = _driver_library(driver_source(model, kind))
         function = getattr(library, spec.entry)
         function.argtypes, function.restype = [ctypes.POINTER(DriverOptions)], ctypes.c_int
         if spec.flag_names:

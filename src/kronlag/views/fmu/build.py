@@ -30,7 +30,6 @@ from ...core.errors import CompilerError, InputError
 from ...numeric import codegen
 from ...numeric.tolerances import CVODE_TIGHTEST
 from ...simulation import drivers
-from ...simulation.interface import c_declarations
 from ...simulation.solvers.compiled import CompiledSolver
 
 __all__ = ["Standard", "STANDARDS", "header_directory", "reactions", "c_source", "compile_fmu",
@@ -144,9 +143,7 @@ def c_source(model, standard: Standard, *, layout_macros: str, reactions_code: s
         f"#define KL_FMU_TOLERANCE_SCALE {CompiledSolver.TOLERANCE_SCALE!r}",
         f"#define KL_FMU_TIGHTEST_RTOL {CVODE_TIGHTEST[0]!r}", f"#define KL_FMU_TIGHTEST_ATOL {CVODE_TIGHTEST[1]!r}",
     ]
-    source = (model.c_source + model.c_kernels(*drivers.DRIVERS["cvode"].kernels) + c_declarations()
-              + drivers._c_file("monitor.c") + drivers._c_file("progress.c") + drivers._c_file("cvode.c")
-              + "\n".join(header) + "\n" + layout_macros + _definitions(names, model.parameter_definitions())
+    source = (drivers.driver_source(model, "cvode") + "\n".join(header) + "\n" + layout_macros + _definitions(names, model.parameter_definitions())
               + reactions_code + _c_file("fmu_core.c") + _c_file(standard.functions))
     return source
 
@@ -159,7 +156,7 @@ def _compiler() -> list[str]:
     compiler = codegen.c_compiler()
     if compiler is None:
         raise CompilerError("FMU export needs a C compiler (gcc or cc on PATH, or $CC)")
-    return [compiler] if isinstance(compiler, str) else list(compiler)
+    return [*compiler.command, *compiler.flags]
 
 
 def compile_fmu(source: str, standard: Standard, identifier: str, binaries: Path, sources: Path) -> None:

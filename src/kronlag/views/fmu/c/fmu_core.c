@@ -146,10 +146,14 @@ static void kl_setup(kl_fmu *fmu, int tolerance_defined, double tolerance, doubl
     kl_changed(fmu);
 }
 
+/* The driver's options seen by its right-hand side: none set (no controller, no limits). */
+static const kronlag_options kl_fmu_no_options;
+
 static kl_data kl_fmu_data(const kl_fmu *fmu, double tol)
 {
     kl_data data;
     memset(&data, 0, sizeof data);
+    data.o = &kl_fmu_no_options;
     data.p = fmu->p;
     data.alpha = fmu->alpha;
     data.beta = fmu->beta;
