@@ -1,0 +1,8 @@
+"""Robot description files read into a :class:`~kronlag.System`: URDF (:func:`load_urdf`), through a
+hardened XML layer (:mod:`.safe_xml`); the file's extra data is a
+:class:`~kronlag.model.robot_formats.description.RobotDescription` (``system.robot``)."""
+
+from .description import RobotDescription, RobotFileWarning, RobotJoint, Visual
+from .urdf import load_urdf
+
+__all__ = ["load_urdf", "RobotDescription", "RobotFileWarning", "RobotJoint", "Visual"]
