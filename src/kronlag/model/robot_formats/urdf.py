@@ -25,7 +25,7 @@ from xml.etree.ElementTree import Element
 import numpy as np
 import sympy as sp
 
-from ...core.errors import ModelError
+from ...core.errors import ModelFileError
 from ..bodies import RigidBody
 from ..frames import GROUND
 from ..rotations import MAX_ROTATION_FACTORS, RotationSequence
@@ -242,9 +242,9 @@ def _tree(document: XmlDocument, links: dict[str, Element], joints: list[_JointS
     roots = [name for name in links if name not in by_child]
     if len(roots) != 1:
         if not roots:
-            raise ModelError(f"{document.source}: the joints form a loop: no link is a root")
-        raise ModelError(f"{document.source}: {len(roots)} root links ({', '.join(roots)}): a URDF robot has one "
-                         "root, joined to every other link")
+            raise ModelFileError(f"{document.source}: the joints form a loop: no link is a root")
+        raise document.error(links[roots[1]], f"a second root link: {len(roots)} links ({', '.join(roots)}) have "
+                                              "no parent joint; a URDF robot has one root, joined to every other link")
     return roots[0], by_child
 
 
@@ -275,8 +275,9 @@ class _Placement:
 
 
 def _body_rotation(placement: _Placement):
-    """The body's rotation: its factors as a RotationSequence where there are few enough, else the matrix."""
-    if len(placement.factors) <= MAX_ROTATION_FACTORS:
+    """The body's rotation: its factors as a RotationSequence where there are few enough, else the matrix
+    (also for a body that does not turn)."""
+    if 0 < len(placement.factors) <= MAX_ROTATION_FACTORS:
         return RotationSequence(placement.factors)
     return placement.rotation
 
