@@ -70,9 +70,19 @@ def _rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     return rz @ ry @ rx
 
 
+def _angle(value: float) -> sp.Expr:
+    """An angle of the file: ``k pi/2`` exactly where ``value`` is the double nearest to it (the file
+    means it; the difference is below double rounding, and exact zeros keep the expressions small),
+    else the number as given."""
+    quarter = round(value / (np.pi / 2))
+    if abs(value - quarter * (np.pi / 2)) <= 4 * np.finfo(float).eps * max(1.0, abs(value)):
+        return quarter * sp.pi / 2
+    return sp.Float(value)
+
+
 def _rpy_factors(roll: float, pitch: float, yaw: float) -> list[tuple[str, sp.Expr]]:
     """The elementary rotations of an ``rpy`` (zero angles left out), as RotationSequence factors."""
-    return [(axis, sp.Float(angle)) for axis, angle in (("z", yaw), ("y", pitch), ("x", roll)) if angle != 0]
+    return [(axis, _angle(angle)) for axis, angle in (("z", yaw), ("y", pitch), ("x", roll)) if angle != 0]
 
 
 def _check_children(document: XmlDocument, element: Element) -> None:
@@ -257,8 +267,8 @@ def _joint_factors(joint: _JointSpec, coordinate: sp.Symbol) -> list[tuple[objec
             return [(name, coordinate if axis[index] > 0 else -coordinate)]
     # a general axis u = Rz(phi) Ry(theta) e_z: R_u(q) = Rz(phi) Ry(theta) Rz(q) Ry(-theta) Rz(-phi)
     theta, phi = float(np.arccos(np.clip(axis[2], -1, 1))), float(np.arctan2(axis[1], axis[0]))
-    turn = [("z", sp.Float(phi)), ("y", sp.Float(theta))]
-    back = [("y", sp.Float(-theta)), ("z", sp.Float(-phi))]
+    turn = [("z", _angle(phi)), ("y", _angle(theta))]
+    back = [("y", _angle(-theta)), ("z", _angle(-phi))]
     return [factor for factor in (*turn, ("z", coordinate), *back) if factor[1] != 0]
 
 
@@ -275,11 +285,33 @@ class _Placement:
 
 
 def _body_rotation(placement: _Placement):
-    """The body's rotation: its factors as a RotationSequence where there are few enough, else the matrix
-    (also for a body that does not turn)."""
-    if 0 < len(placement.factors) <= MAX_ROTATION_FACTORS:
-        return RotationSequence(placement.factors)
-    return placement.rotation
+    """The body's rotation: its factors as a RotationSequence; a chain of more than
+    MAX_ROTATION_FACTORS factors is rewritten with the constant rotations moved to its end
+    (``C R_a(q) = R_{C a}(q) C``): one factor per joint about its axis at q = 0, then the constant
+    rest as at most three; a body that does not turn keeps its constant matrix."""
+    factors = placement.factors
+    if not factors:
+        return placement.rotation
+    if len(factors) > MAX_ROTATION_FACTORS:
+        moved, constant = [], np.eye(3)
+        for axis, angle in factors:
+            unit = np.array(_PRINCIPAL[axis] if isinstance(axis, str) else axis, dtype=float)
+            if angle.free_symbols:
+                moved.append((tuple(sp.Float(x) for x in constant @ unit / np.linalg.norm(constant @ unit)), angle))
+            else:
+                constant = constant @ np.array(RotationSequence([(axis, angle)]).matrix, dtype=float)
+        factors = moved + _matrix_factors(constant)
+    return RotationSequence(factors)
+
+
+_PRINCIPAL = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1)}
+
+
+def _matrix_factors(matrix: np.ndarray) -> list:
+    """A constant rotation matrix as (at most three) factors ``Rz(yaw) Ry(pitch) Rx(roll)``."""
+    yaw, pitch, roll = (float(np.arctan2(matrix[1, 0], matrix[0, 0])), float(np.arcsin(np.clip(-matrix[2, 0], -1, 1))),
+                        float(np.arctan2(matrix[2, 1], matrix[2, 2])))
+    return _rpy_factors(roll, pitch, yaw)
 
 
 def _compact(factors: list) -> list:
@@ -287,13 +319,7 @@ def _compact(factors: list) -> list:
     result, run = [], []
 
     def flush():
-        if len(run) <= 3:
-            result.extend(run)
-        else:
-            matrix = np.array(RotationSequence(run).matrix, dtype=float)
-            yaw, pitch, roll = (float(np.arctan2(matrix[1, 0], matrix[0, 0])), float(np.arcsin(-matrix[2, 0])),
-                                float(np.arctan2(matrix[2, 1], matrix[2, 2])))
-            result.extend(_rpy_factors(roll, pitch, yaw))
+        result.extend(run if len(run) <= 3 else _matrix_factors(np.array(RotationSequence(run).matrix, dtype=float)))
         run.clear()
 
     for factor in factors:
@@ -342,7 +368,7 @@ def load_urdf(path: str | Path) -> System:
     if not links:
         raise document.error(robot, "has no <link>")
     specs = [_joint(document, element) for element in robot.findall("joint")]
-    root, by_child = _tree(document, links, specs)
+    root, _ = _tree(document, links, specs)
     children: dict[str, list[_JointSpec]] = {name: [] for name in links}
     for spec in specs:
         children[spec.parent].append(spec)
@@ -374,8 +400,9 @@ def load_urdf(path: str | Path) -> System:
     for spec in order:
         parent = placements[spec.parent]
         x, y, z, roll, pitch, yaw = spec.origin
-        factors = _compact(parent.factors + _rpy_factors(roll, pitch, yaw))
-        rotation = parent.rotation * sp.Matrix(_rpy_matrix(roll, pitch, yaw))
+        turn = _rpy_factors(roll, pitch, yaw)
+        factors = _compact(parent.factors + turn)
+        rotation = parent.rotation * RotationSequence(turn).matrix if turn else parent.rotation
         origin = parent.origin + parent.rotation * sp.Matrix([x, y, z])
         points = parent.points + [origin]
         if spec.kind == "fixed":
