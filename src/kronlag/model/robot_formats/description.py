@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...core.errors import KronlagWarning
+from ..frames import Frame
 
 __all__ = ["RobotFileWarning", "JointLimits", "RobotJoint", "Visual", "RobotDescription", "coordinate_name"]
 
@@ -98,12 +99,18 @@ class RobotDescription:
         The System body each link moves with (links joined by fixed joints share one; the
         root and links fixed to it: ``"ground"``).
     visuals : tuple of Visual
+    frames : dict of str to Frame
+        Every link's frame (origin and rotation, expressions of the coordinates) in the world.
     values : dict of str to float
-        Default parameter values: ``g`` = 9.81 and every actuator torque 0.
+        Default parameter values: ``g`` (9.81, or the magnitude of the file's gravity) and every
+        actuator torque 0.
     q_reference : dict of str to float
         The reference pose of the file (every joint at 0, mimic joints at their offset).
     skipped : str
         The elements the reader did not use, with their counts.
+    redundant : list of str
+        Constraint rows of the file dropped as identically zero (a planar MJCF ``connect``'s
+        out-of-plane row).
     """
 
     source: str
@@ -112,9 +119,11 @@ class RobotDescription:
     joints: tuple[RobotJoint, ...] = ()
     body_of_link: dict[str, str] = field(default_factory=dict)
     visuals: tuple[Visual, ...] = ()
+    frames: dict[str, Frame] = field(default_factory=dict)
     values: dict[str, float] = field(default_factory=dict)
     q_reference: dict[str, float] = field(default_factory=dict)
     skipped: str = ""
+    redundant: list[str] = field(default_factory=list)
 
     def joint(self, name: str) -> RobotJoint:
         """The joint called ``name``."""

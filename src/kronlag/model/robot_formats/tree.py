@@ -22,14 +22,14 @@ import numpy as np
 import sympy as sp
 
 from ..bodies import RigidBody
-from ..frames import GROUND
+from ..frames import GROUND, Frame
 from ..rotations import MAX_ROTATION_FACTORS, RotationSequence
 from ..system import System
 from .description import JointLimits, RobotDescription, RobotFileWarning, RobotJoint, Visual, coordinate_name
 from .safe_xml import XmlDocument
 
-__all__ = ["Inertial", "NO_MASS", "TreeJoint", "build_system", "check_inertia", "combine", "moved", "rpy_matrix",
-           "rpy_of", "transform"]
+__all__ = ["Inertial", "NO_MASS", "TreeJoint", "build_system", "check_inertia", "combine", "moved", "report_skipped",
+           "rpy_matrix", "rpy_of", "transform"]
 
 #: Relative tolerance of the physical checks of an inertial (as kronlag.model.bodies).
 _PHYSICAL_TOLERANCE = 1e-9
@@ -242,9 +242,12 @@ def _tree(document: XmlDocument, links: dict[str, Element], joints: list[TreeJoi
 
 def build_system(document: XmlDocument, *, name: str, file_format: str, links: dict[str, Element],
                  inertials: dict[str, Inertial], specs: list[TreeJoint],
-                 visuals: list[tuple[str, str, tuple[float, ...], np.ndarray, str | None]]) -> System:
+                 visuals: list[tuple[str, str, tuple[float, ...], np.ndarray, str | None]],
+                 gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)) -> System:
     """The System of a kinematic tree in joint coordinates, with its :class:`RobotDescription`
-    (``system.robot``); ``visuals`` are ``(link, shape, size, pose in the link frame, filename)``.
+    (``system.robot``); ``visuals`` are ``(link, shape, size, pose in the link frame, filename)``;
+    ``gravity`` is the file's (the parameter ``g`` is its magnitude, its direction is kept).
+    The reader reports the skipped elements (:func:`report_skipped`) once it is done.
 
     Raises
     ------
@@ -275,7 +278,11 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
     actuated = [spec for spec in moving if spec.mimic is None]
     torques = {spec.name: sp.Symbol(f"tau_{coordinate_of[spec.name].name}") for spec in actuated}
     g = sp.Symbol("g")
-    system = System(list(coordinate_of.values()), parameters=[g, *torques.values()], gravity=(0, 0, -g), name=name)
+    magnitude = float(np.linalg.norm(gravity))
+    direction = np.array(gravity) / magnitude if magnitude > 0 else np.array([0.0, 0.0, -1.0])
+    down = [sp.Integer(int(x)) if x in (-1.0, 0.0, 1.0) else sp.Float(x) for x in direction]
+    system = System(list(coordinate_of.values()), parameters=[g, *torques.values()],
+                    gravity=[g * x for x in down], name=name)
     placements = {root: _Placement(sp.zeros(3, 1), sp.eye(3), [], GROUND, np.eye(4), [])}
     parts: dict[str, list[Inertial]] = {}
     for spec in order:
@@ -331,13 +338,19 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
         body_of_link={name: placement.body for name, placement in placements.items()},
         visuals=tuple(Visual(link, placements[link].body, shape, size, placements[link].in_body @ pose, filename)
                       for link, shape, size, pose, filename in visuals),
-        values={"g": 9.81, **{symbol.name: 0.0 for symbol in torques.values()}},
+        frames={link: Frame(placement.origin, placement.rotation) for link, placement in placements.items()},
+        values={"g": magnitude, **{symbol.name: 0.0 for symbol in torques.values()}},
         q_reference={coordinate_of[spec.name].name: spec.mimic[2] if spec.mimic else 0.0 for spec in moving},
         skipped=document.skipped_summary())
+    return system
+
+
+def report_skipped(document: XmlDocument, system: System) -> None:
+    """Record the elements the reader skipped in ``system.robot`` and warn once, listing them."""
+    system.robot.skipped = document.skipped_summary()
     if system.robot.skipped:
         warnings.warn(f"{document.source}: not used by kronlag (skipped): {system.robot.skipped}", RobotFileWarning,
-                      stacklevel=2)
-    return system
+                      stacklevel=3)
 
 
 

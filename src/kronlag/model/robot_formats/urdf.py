@@ -25,7 +25,7 @@ import numpy as np
 from ..system import System
 from .description import JointLimits
 from .safe_xml import XmlDocument, read_xml
-from .tree import NO_MASS, Inertial, TreeJoint, build_system, check_inertia, rpy_matrix, transform
+from .tree import NO_MASS, Inertial, TreeJoint, build_system, check_inertia, report_skipped, rpy_matrix, transform
 
 __all__ = ["load_urdf", "JOINT_TYPES"]
 
@@ -181,7 +181,9 @@ def load_urdf(path: str | Path) -> System:
     if not links:
         raise document.error(robot, "has no <link>")
     specs = [_joint(document, element) for element in robot.findall("joint")]
-    return build_system(document, name=robot.get("name") or Path(path).stem, file_format="urdf", links=links,
-                        inertials={name: _inertial(document, element) for name, element in links.items()},
-                        specs=specs, visuals=[(name, *visual) for name, element in links.items()
-                                              for visual in _visuals(document, element)])
+    system = build_system(document, name=robot.get("name") or Path(path).stem, file_format="urdf", links=links,
+                          inertials={name: _inertial(document, element) for name, element in links.items()},
+                          specs=specs, visuals=[(name, *visual) for name, element in links.items()
+                                                for visual in _visuals(document, element)])
+    report_skipped(document, system)
+    return system
