@@ -253,3 +253,142 @@ def test_more_arms_agree_with_pinocchio(name):
     system = _agree(name)
     if name == "panda":  # the finger's mimic joint is the one constraint
         assert [c.name for c in system.constraints] == ["panda_finger_joint2.mimic"]
+
+
+# -- MJCF ---------------------------------------------------------------------------------------------
+
+FILES = Path(__file__).resolve().parent / "robot_files"
+
+
+def mjcf(tmp_path, body: str, equality: str = "", name: str = "model.xml") -> Path:
+    path = tmp_path / name
+    path.write_text(f'<mujoco model="m"><compiler angle="radian"/><worldbody>{body}</worldbody>'
+                    f"<equality>{equality}</equality></mujoco>")
+    return path
+
+
+PENDULUM = ('<body name="arm" pos="0 0 0"><joint name="hinge" axis="0 1 0"/>'
+            '<inertial pos="0.5 0 0" mass="1" diaginertia="0.001 0.02 0.02"/></body>')
+
+
+def mjcf_error(path) -> str:
+    with pytest.raises(ModelFileError) as caught, warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotFileWarning)
+        kronlag.load_mjcf(path)
+    message = str(caught.value)
+    assert "\n" not in message and str(path) in message
+    return message
+
+
+@pytest.mark.parametrize("body, equality, expected", [
+    (PENDULUM.replace('axis="0 1 0"', 'type="ball"'), "", r"<joint name='hinge'>: type 'ball': only hinge and slide"),
+    (PENDULUM.replace('<inertial pos="0.5 0 0" mass="1" diaginertia="0.001 0.02 0.02"/>', '<geom size="0.1"/>'), "",
+     r"<body name='arm'>: has geoms but no <inertial>"),
+    (PENDULUM.replace('mass="1"', 'mass="-1"'), "", r"<body name='arm'>: <inertial>: mass = -1 is negative"),
+    (PENDULUM, '<connect body1="arm" body2="nope" anchor="0 0 0"/>', r"<connect>: body2='nope' is not a body"),
+    (PENDULUM, '<joint joint1="hinge" joint2="nope"/>', r"<joint>: names the joint 'nope'"),
+    (PENDULUM.replace('axis="0 1 0"', 'axis="0 1 0" class="stiff"'), "", r"class='stiff': no <default"),
+])
+def test_bad_mjcf(tmp_path, body, equality, expected):
+    assert re.search(expected, mjcf_error(mjcf(tmp_path, body, equality))), mjcf_error(mjcf(tmp_path, body, equality))
+
+
+def test_weld_keeps_the_rows_that_are_not_identically_zero(tmp_path):
+    """A hinge about y welded to the world off its axis: the rows x, z and ry move, y, rx, rz are
+    identically zero (dropped, listed as redundant); the mobility is 0."""
+    system = kronlag.load_mjcf(mjcf(tmp_path, PENDULUM, '<weld name="w" body1="world" body2="arm" anchor="0.1 0 0"/>'))
+    assert [c.name for c in system.constraints] == ["w.x", "w.z", "w.ry"]
+    assert system.robot.redundant == ["w.y", "w.rx", "w.rz"]
+    model = kronlag.derive(system).numeric(system.robot.values)
+    assert model.mobility([0.0]) == 0
+
+
+def test_joint_equality_is_the_polynomial(tmp_path):
+    two = PENDULUM + PENDULUM.replace('name="arm"', 'name="arm2"').replace('name="hinge"', 'name="hinge2"')
+    system = kronlag.load_mjcf(mjcf(tmp_path, two, '<joint name="gear" joint1="hinge2" joint2="hinge" '
+                                                   'polycoef="0.1 -2 0.5 0 0"/>'))
+    (constraint,) = system.constraints
+    assert constraint.name == "gear.joint"
+    q = 0.3
+    assert float(constraint.expression.subs({"hinge": q, "hinge2": 0.1 - 2 * q + 0.5 * q ** 2})) == pytest.approx(0)
+
+
+@pytest.mark.slow
+def test_mjcf_tree_agrees_with_mujoco():
+    """A spatial arm with default classes, degrees, euler (zyx), quat, axisangle, xyaxes, two joints in
+    one body, a slide, fullinertia and a welded body: M and C qd + g agree with MuJoCo's mj_fullM and
+    qfrc_bias."""
+    mujoco = pytest.importorskip("mujoco")
+    path = FILES / "arm.xml"
+    with pytest.warns(RobotFileWarning, match="mujoco/actuator"):
+        system = kronlag.load_mjcf(path)
+    model = kronlag.derive(system).numeric(system.robot.values)
+    peer = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(peer)
+    names = [joint.name for joint in system.robot.joints if joint.coordinate]
+    qpos, dof = [peer.joint(n).qposadr[0] for n in names], [peer.joint(n).dofadr[0] for n in names]
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        q, qd = rng.uniform(-1, 1, len(names)), rng.uniform(-1, 1, len(names))
+        data.qpos[qpos], data.qvel[dof] = q, qd
+        mujoco.mj_forward(peer, data)
+        mass = np.zeros((peer.nv, peer.nv))
+        mujoco.mj_fullM(peer, data, mass)
+        mass, bias = mass[np.ix_(dof, dof)], data.qfrc_bias[dof]
+        assert np.abs(model.M(q) - mass).max() <= 1e-9 * np.abs(mass).max()
+        assert np.abs(model.Cqd(q, qd) + model.g(q) - bias).max() <= 1e-9 * max(1.0, np.abs(bias).max())
+
+
+def _planar_four_bar():
+    """The four-bar of four_bar.xml built by hand in the plane (x, z -> X, Y; angle = -rotation about y)
+    with planar bodies in absolute coordinates and revolute joints."""
+    import sympy as sp
+
+    symbols = sp.symbols("x1 y1 a1 x2 y2 a2 x3 y3 a3")
+    x1, y1, a1, x2, y2, a2, x3, y3, a3 = symbols
+    g, R = sp.Symbol("g"), sp.Rational
+    system = kronlag.System(symbols, parameters=[g], gravity=(0, -g))
+    for name, mass, inertia, x, y, a in (("crank", 1, R(12, 10000), x1, y1, a1), ("coupler", 2, R(3, 100), x2, y2, a2),
+                                         ("follower", R(3, 2), R(55, 10000), x3, y3, a3)):
+        system.add_body(kronlag.PlanarBody(name, mass=mass, inertia=inertia, position=(x, y), angle=a))
+    system.add_joint("revolute", "ground", "crank", at_a=(0, 0), at_b=(0, R(-5, 100)))
+    system.add_joint("revolute", "crank", "coupler", at_a=(0, R(5, 100)), at_b=(R(-2, 10), R(-5, 100)))
+    system.add_joint("revolute", "ground", "follower", at_a=(R(35, 100), 0), at_b=(R(-25, 1000), R(-1, 10)))
+    system.add_joint("revolute", "coupler", "follower", at_a=(R(2, 10), R(5, 100)), at_b=(R(25, 1000), R(1, 10)))
+    return kronlag.derive(system).numeric({"g": 9.81})
+
+
+def _turn(angle):
+    return np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+
+
+@pytest.mark.slow
+def test_closed_loop_mjcf_is_exact():
+    """four_bar.xml: the connect's out-of-plane row is dropped (redundant), the loop closes, the
+    mobility is 1, and the accelerations agree with the same four-bar built with planar bodies."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        system = kronlag.load_mjcf(FILES / "four_bar.xml")
+    assert [c.name for c in system.constraints] == ["loop.x", "loop.z"] and system.robot.redundant == ["loop.y"]
+    model = kronlag.derive(system).numeric(system.robot.values)
+    q, qd = model.assemble([0.3, 0, 0], fixed={"crank_angle": 0.3}, qd_guess=[1.0, 0, 0], qd_fixed={"crank_angle": 1.0})
+    assert model.mobility(q) == 1
+    ours = model.forward_dynamics(q, qd).qdd
+    planar = _planar_four_bar()
+    t1, t2, t3 = q[0], q[0] + q[1], q[2]
+    guess = [*(_turn(-t1) @ [0, 0.05]), -t1, *(_turn(-t1) @ [0, 0.1] + _turn(-t2) @ [0.2, 0.05]), -t2,
+             *(np.array([0.35, 0]) + _turn(-t3) @ [0.025, 0.1]), -t3]
+    pq, pqd = planar.assemble(guess, fixed={"a1": -t1}, qd_guess=np.zeros(9), qd_fixed={"a1": -qd[0]})
+    assert np.abs(pq - guess).max() <= 1e-12  # the same configuration
+    reference = planar.forward_dynamics(pq, pqd).qdd
+    expected = np.array([-reference[2], -(reference[5] - reference[2]), -reference[8]])
+    assert np.abs(ours - expected).max() <= 1e-9 * np.abs(expected).max()
+
+
+def test_load_model_reads_mjcf(tmp_path, capsys):
+    path = mjcf(tmp_path, PENDULUM)
+    assert kronlag.load_model(path).system.name == "m"
+    from kronlag.app.cli import main
+
+    assert main(["check", str(path)]) == 0
+    assert "no constraints: a tree" in capsys.readouterr().out

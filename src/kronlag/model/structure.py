@@ -44,14 +44,20 @@ def describe(system: System) -> str:
                          f"{j.child} into {robot.body_of_link[j.child]}" for j in fixed) if fixed else ""))
         coupling = [f"{joint.name}.mimic ({joint.name} = {joint.mimic[1]:g} * {joint.mimic[0]} + {joint.mimic[2]:g})"
                     for joint in moving if joint.mimic]
-        lines.append("constraints coupling joints: " + (", ".join(coupling) or "none (a tree)"))
+        if coupling:
+            lines.append("mimic joints (constraints): " + ", ".join(coupling))
+        if robot.redundant:
+            lines.append("rows dropped as identically zero (redundant): " + ", ".join(robot.redundant))
     if system.joints:
         lines.append(f"constraint joints: {len(system.joints)} ({_counted(Counter(j.kind for j in system.joints))}): "
                      + ", ".join(f"{joint.name} ({len(joint.constraint_names)} rows)" for joint in system.joints))
     named = {name for joint in system.joints for name in joint.constraint_names}
     others = [c.name for c in system.constraints if c.name not in named and not c.name.endswith(".mimic")]
     if others:
-        lines.append("other constraints: " + ", ".join(others))
+        lines.append(("loop-closing and coupling constraints: " if robot is not None else "other constraints: ")
+                     + ", ".join(others))
+    elif robot is not None and not system.constraints:
+        lines.append("no constraints: a tree")
     lines.append(f"Gruebler count m - r - s = {m - r - s} (the mobility, from the rank of Phi_q at the assembled "
                  "state: kronlag check)")
     return "\n".join(lines)
