@@ -171,6 +171,8 @@ def test_pendulum_with_fixed_tip_matches_hand_values(tmp_path):
                 tip, joint("weld", "arm", "tip", kind="fixed", x=1.0))
     system = kronlag.load_urdf(path)
     assert [b.name for b in system.bodies] == ["arm"] and [q.name for q in system.coordinates] == ["hinge"]
+    (line,) = system.drawing  # the animation's stick figure: from the hinge to the tip
+    assert [tuple(float(x) for x in point.subs("hinge", 0)) for point in line.points] == [(0, 0, 0), (1, 0, 0)]
     model = kronlag.derive(system).numeric({"g": 9.81, "tau_hinge": 0.0})
     # about the axis (y): the arm's iyy (0.02 as given) + 1 * 0.5^2, the tip's 0.001 + 2 * 1^2
     inertia = 0.02 + 0.25 + 0.001 + 2.0

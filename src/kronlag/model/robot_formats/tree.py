@@ -308,6 +308,7 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
     for link, placement in placements.items():
         parts.setdefault(placement.body, []).append(moved(inertials[link], placement.in_body))
 
+    centres: dict[str, sp.Matrix] = {}
     for spec in moving:
         inertial = combine(parts[spec.child])
         placement = placements[spec.child]
@@ -319,6 +320,7 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
                                                         "that has mass or inertia (its acceleration is undetermined)")
             continue
         centre = placement.origin + placement.rotation * sp.Matrix(inertial.centre)
+        centres[spec.child] = centre
         system.add_body(RigidBody(spec.child, mass=sp.Float(inertial.mass), inertia=sp.Matrix(inertial.tensor),
                                   position=centre, rotation=_body_rotation(placement), simplify=False))
     for spec in moving:
@@ -327,7 +329,7 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
             system.add_constraint(coordinate_of[spec.name] - sp.Float(multiplier) * coordinate_of[joint]
                                   - sp.Float(offset), name=f"{spec.name}.mimic")
     system.add_generalized_force([torques.get(spec.name, 0) for spec in moving], name="joint torques")
-    _add_drawing(system, order, placements)
+    _add_drawing(system, order, placements, centres)
 
     system.robot = RobotDescription(
         source=document.source, format=file_format, root=root,
@@ -365,14 +367,18 @@ def _depth_first(root: str, children: dict[str, list[TreeJoint]]) -> list[TreeJo
     return order
 
 
-def _add_drawing(system: System, order: list[TreeJoint], placements: dict[str, _Placement]) -> None:
+def _add_drawing(system: System, order: list[TreeJoint], placements: dict[str, _Placement],
+                 centres: dict[str, sp.Matrix]) -> None:
     """A stick figure for the animation: a polyline through the joint origins from the root to each
-    leaf link, each starting where it leaves the branches drawn before."""
+    leaf link (and on to its centre of mass if it moves), each starting where it leaves the
+    branches drawn before."""
     drawn: set[int] = set()
     for spec in order:
         if any(other.parent == spec.child for other in order):
             continue  # not a leaf
-        points = placements[spec.child].points + [placements[spec.child].origin]
+        leaf = placements[spec.child]
+        ends = [leaf.origin] + ([centres[spec.child]] if spec.child in centres else [])  # a moving leaf: on to its COM
+        points = leaf.points + [point for point in ends if point != leaf.points[-1]]
         start = max((index for index, point in enumerate(points) if id(point) in drawn), default=0)
         line = points[start:]
         drawn.update(id(point) for point in line)
