@@ -365,13 +365,16 @@ def _turn(angle):
 
 
 @pytest.mark.slow
-def test_closed_loop_mjcf_is_exact():
-    """four_bar.xml: the connect's out-of-plane row is dropped (redundant), the loop closes, the
+@pytest.mark.parametrize("name, redundant", [("four_bar.xml", ["loop.y"]),
+                                             ("four_bar.sdf", ["loop.y", "loop.axis1", "loop.axis2"])])
+def test_closed_loop_is_exact(name, redundant):
+    """The four-bar from MJCF (closed by a connect) and from SDF (by a revolute joint whose child is
+    already in the tree): the identically zero rows are dropped (redundant), the loop closes, the
     mobility is 1, and the accelerations agree with the same four-bar built with planar bodies."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        system = kronlag.load_mjcf(FILES / "four_bar.xml")
-    assert [c.name for c in system.constraints] == ["loop.x", "loop.z"] and system.robot.redundant == ["loop.y"]
+        system = kronlag.model.robot_formats.load_robot(FILES / name)
+    assert [c.name for c in system.constraints] == ["loop.x", "loop.z"] and system.robot.redundant == redundant
     model = kronlag.derive(system).numeric(system.robot.values)
     q, qd = model.assemble([0.3, 0, 0], fixed={"crank_angle": 0.3}, qd_guess=[1.0, 0, 0], qd_fixed={"crank_angle": 1.0})
     assert model.mobility(q) == 1
@@ -394,3 +397,43 @@ def test_load_model_reads_mjcf(tmp_path, capsys):
 
     assert main(["check", str(path)]) == 0
     assert "no constraints: a tree" in capsys.readouterr().out
+
+
+# -- SDF ----------------------------------------------------------------------------------------------
+
+def sdf(tmp_path, model: str) -> Path:
+    path = tmp_path / "model.sdf"
+    path.write_text(f'<sdf version="1.7"><model name="m">{model}</model></sdf>')
+    return path
+
+
+SDF_LINK = ('<link name="arm"><inertial><pose>0.5 0 0 0 0 0</pose><mass>1</mass><inertia><ixx>0.001</ixx>'
+            '<iyy>0.02</iyy><izz>0.02</izz></inertia></inertial></link>')
+SDF_HINGE = ('<joint name="hinge" type="revolute"><parent>world</parent><child>arm</child>'
+             '<axis><xyz>0 1 0</xyz></axis></joint>')
+
+
+@pytest.mark.parametrize("model, expected", [
+    (SDF_LINK, r"no joint fixes the model to 'world': a floating base is not supported yet"),
+    (SDF_LINK + SDF_HINGE.replace('type="revolute"', 'type="ball"'), r"<joint name='hinge'>: type 'ball' in the tree"),
+    (SDF_LINK + SDF_HINGE.replace("<child>arm", "<child>nope"), r"<child>nope</child> is not a link"),
+    (SDF_LINK.replace("<link name=\"arm\">", '<link name="arm"><pose relative_to="nowhere">0 0 0 0 0 0</pose>')
+     + SDF_HINGE, r"relative_to='nowhere' is not a link or joint"),
+    (SDF_LINK.replace("<mass>1</mass>", "<mass>-1</mass>") + SDF_HINGE, r"<link name='arm'>: <inertial>: mass = -1"),
+])
+def test_bad_sdf(tmp_path, model, expected):
+    path = sdf(tmp_path, model)
+    with pytest.raises(ModelFileError) as caught:
+        kronlag.load_sdf(path)
+    assert re.search(expected, str(caught.value)) and str(path) in str(caught.value), str(caught.value)
+
+
+def test_sdf_pendulum_matches_hand_values(tmp_path):
+    """A link placed by relative_to and a joint posed in the child's frame: M about the hinge."""
+    model = (SDF_LINK.replace('<link name="arm">', '<link name="arm"><pose relative_to="hinge">0 0 0 0 0 0</pose>')
+             + SDF_HINGE.replace("<parent>", "<pose relative_to=\"__model__\">0 0 1 0 0 0</pose><parent>"))
+    system = kronlag.load_sdf(sdf(tmp_path, model))
+    model = kronlag.derive(system).numeric(system.robot.values)
+    assert model.M([0.4])[0, 0] == pytest.approx(0.02 + 0.25, rel=1e-12)
+    assert model.g([0.0])[0] == pytest.approx(-9.81 * 0.5, rel=1e-12)
+    assert [float(x) for x in system.robot.frames["arm"].origin.subs("hinge", 0.3)] == [0, 0, 1]

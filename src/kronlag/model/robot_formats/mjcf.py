@@ -36,9 +36,10 @@ import sympy as sp
 from ..system import System
 from .description import JointLimits
 from .safe_xml import XmlDocument, numbers, read_xml
-from .tree import NO_MASS, Inertial, TreeJoint, build_system, check_inertia, report_skipped, rpy_of
+from .tree import (NO_MASS, Inertial, TreeJoint, at_reference, build_system, check_inertia, orientation_rows,
+                   report_skipped, rpy_of)
 
-__all__ = ["load_mjcf"]
+__all__ = ["load_mjcf", "add_rows"]
 
 #: Elements of a body the reader uses (the others are listed as skipped).
 _BODY_USED = {"body", "inertial", "joint", "geom"}
@@ -289,11 +290,6 @@ def _frame_of(document: XmlDocument, system: System, element: Element, key: str)
     return link, sp.Matrix(frame.origin), sp.Matrix(frame.rotation)
 
 
-def _at_reference(system: System, expression) -> np.ndarray:
-    zero = {q: system.robot.q_reference.get(q.name, 0.0) for q in system.coordinates}
-    return np.array(sp.Matrix(expression).subs(zero).evalf(), dtype=float)
-
-
 def _identically_zero(expression: sp.Expr, at: np.ndarray, symbols: list) -> bool:
     """Whether a row is zero at the reference and at random coordinates (then it is zero everywhere,
     but for a set of measure zero that random points do not hit)."""
@@ -302,7 +298,7 @@ def _identically_zero(expression: sp.Expr, at: np.ndarray, symbols: list) -> boo
     return all(abs(float(evaluate(*point))) <= _ZERO_ROW for point in points)
 
 
-def _add_rows(document: XmlDocument, system: System, element: Element, name: str, rows) -> None:
+def add_rows(document: XmlDocument, system: System, element: Element, name: str, rows) -> None:
     """Add the rows ``(suffix, expression)``; drop those identically zero (listed in
     ``system.robot.redundant``), refuse a nonzero constant (the loop cannot be closed)."""
     symbols = list(system.coordinates)
@@ -335,7 +331,7 @@ def _add_equality(document: XmlDocument, system: System, element: Element, index
         leader = coordinates[second] if second is not None else sp.Integer(0)
         polynomial = sum(sp.Float(c) * leader ** k for k, c in enumerate(coefficients) if c != 0) \
             if second is not None else sp.Float(coefficients[0])
-        _add_rows(document, system, element, name, [("joint", coordinates[first] - polynomial)])
+        add_rows(document, system, element, name, [("joint", coordinates[first] - polynomial)])
         return
     if element.tag not in ("connect", "weld"):
         document.skip(element, "equality")
@@ -348,7 +344,8 @@ def _add_equality(document: XmlDocument, system: System, element: Element, index
     if element.tag == "connect":
         anchor1 = np.array(document.numbers(element, "anchor", 3)) - shifts[link1]
         point1 = origin1 + rotation1 * sp.Matrix(anchor1)
-        reference2 = _at_reference(system, rotation2).T @ (_at_reference(system, point1) - _at_reference(system, origin2))
+        reference2 = (at_reference(system, rotation2).T
+                      @ (at_reference(system, point1) - at_reference(system, origin2)))
         point2 = origin2 + rotation2 * sp.Matrix(reference2.ravel())
     else:
         anchor2 = np.array(document.numbers(element, "anchor", 3, default=(0, 0, 0))) - shifts[link2]
@@ -357,13 +354,11 @@ def _add_equality(document: XmlDocument, system: System, element: Element, index
         if any(relpose[3:]):
             relative = _quaternion_matrix(*relpose[3:])  # body2 in body1
         else:
-            relative = _at_reference(system, rotation1).T @ _at_reference(system, rotation2)
-        reference1 = _at_reference(system, rotation1).T @ (_at_reference(system, point2) - _at_reference(system, origin1))
+            relative = at_reference(system, rotation1).T @ at_reference(system, rotation2)
+        reference1 = (at_reference(system, rotation1).T
+                      @ (at_reference(system, point2) - at_reference(system, origin1)))
         point1 = origin1 + rotation1 * sp.Matrix(reference1.ravel())
     rows = list(zip(("x", "y", "z"), point2 - point1))
     if element.tag == "weld":
-        expected = rotation1 * sp.Matrix(relative)
-        unit = sp.eye(3)
-        rows += [(label, (expected * unit[:, i]).dot(rotation2 * unit[:, j]))
-                 for label, i, j in (("rx", 1, 2), ("ry", 2, 0), ("rz", 0, 1))]
-    _add_rows(document, system, element, name, rows)
+        rows += orientation_rows(rotation1, relative, rotation2)
+    add_rows(document, system, element, name, rows)

@@ -28,7 +28,8 @@ from ..system import System
 from .description import JointLimits, RobotDescription, RobotFileWarning, RobotJoint, Visual, coordinate_name
 from .safe_xml import XmlDocument
 
-__all__ = ["Inertial", "NO_MASS", "TreeJoint", "build_system", "check_inertia", "combine", "moved", "report_skipped",
+__all__ = ["Inertial", "NO_MASS", "TreeJoint", "at_reference", "build_system", "check_inertia", "combine", "moved",
+           "orientation_rows", "report_skipped",
            "rpy_matrix", "rpy_of", "transform"]
 
 #: Relative tolerance of the physical checks of an inertial (as kronlag.model.bodies).
@@ -345,6 +346,20 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
         q_reference={coordinate_of[spec.name].name: spec.mimic[2] if spec.mimic else 0.0 for spec in moving},
         skipped=document.skipped_summary())
     return system
+
+
+def at_reference(system: System, expression) -> np.ndarray:
+    """A matrix of expressions of the coordinates at the file's reference pose, as floats."""
+    reference = {q: system.robot.q_reference.get(q.name, 0.0) for q in system.coordinates}
+    return np.array(sp.Matrix(expression).subs(reference).evalf(), dtype=float)
+
+
+def orientation_rows(rotation1: sp.Matrix, relative: np.ndarray, rotation2: sp.Matrix) -> list[tuple[str, sp.Expr]]:
+    """The rows ``rx, ry, rz`` that hold ``R2 = R1 relative`` (as kronlag.joints' orientation lock:
+    ``(R1 relative e_y).(R2 e_z)``, ``(R1 relative e_z).(R2 e_x)``, ``(R1 relative e_x).(R2 e_y)``)."""
+    expected, unit = rotation1 * sp.Matrix(relative), sp.eye(3)
+    return [(label, (expected * unit[:, i]).dot(rotation2 * unit[:, j]))
+            for label, i, j in (("rx", 1, 2), ("ry", 2, 0), ("rz", 0, 1))]
 
 
 def report_skipped(document: XmlDocument, system: System) -> None:
