@@ -138,6 +138,21 @@ def _limits(document: XmlDocument, joint: Element) -> JointLimits:
                        friction=value(dynamics, "friction"))
 
 
+#: The children of each element the reader uses (the others are listed as skipped).
+_USED = {"model": {"link", "joint", "pose", "static"}, "link": {"pose", "inertial", "visual"},
+         "joint": {"parent", "child", "pose", "axis", "axis2"},
+         "axis": {"xyz", "limit", "dynamics", "use_parent_model_frame"}, "axis2": {"xyz", "limit", "dynamics"},
+         "visual": {"pose", "geometry"}, "inertial": {"pose", "mass", "inertia"}}
+
+
+def _note_skipped(document: XmlDocument, element: Element) -> None:
+    for child in element:
+        if child.tag not in _USED[element.tag]:
+            document.skip(child, element.tag)
+        elif child.tag in _USED:
+            _note_skipped(document, child)
+
+
 def load_sdf(path: str | Path) -> System:
     """Read an SDFormat file (its first ``<model>``) into a :class:`~kronlag.System` (see the module
     docstring).
@@ -158,9 +173,7 @@ def load_sdf(path: str | Path) -> System:
         raise document.error(root, "has no <model>")
     links = {document.required(link, "name"): link for link in model.findall("link")}
     joints = {document.required(joint, "name"): joint for joint in model.findall("joint")}
-    for child in model:
-        if child.tag not in ("link", "joint", "pose", "static"):
-            document.skip(child, "model")
+    _note_skipped(document, model)
     poses = _Poses(document, links, joints)
     parent_joint: dict[str, str] = {}
     loops: list[str] = []
