@@ -189,8 +189,10 @@ def read_xml(path: str | Path) -> XmlDocument:
         reason = str(error).split(":")[0]
         raise ModelFileError(f"{source}:{line}: malformed XML at column {column + 1}: {reason}") from None
     except DefusedXmlException as error:
-        raise ModelFileError(f"{source}: refused: {error} (entity declarations and external references are "
-                             "not read: robot files are data)") from None
+        what = f"the entity {error.name!r}" if getattr(error, "name", None) else "an external reference"
+        raise ModelFileError(f"{source}:{parser.parser.CurrentLineNumber}: refused: the file declares {what} "
+                             "(entity declarations and external references are not read: robot files are "
+                             "data)") from None
     document = XmlDocument(source, root, builder.lines)
     _refuse_xacro(document)
     return document
