@@ -228,10 +228,14 @@ def run_mjcf(name: str, *, quick: bool) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("robots", nargs="*", default=[*ROBOTS, "arm", "four_bar"],
-                        choices=[*ROBOTS, "arm", "four_bar", []])
+    known = [*ROBOTS, "arm", "four_bar"]
+    parser.add_argument("robots", nargs="*", help=f"some of {', '.join(known)} (default: all)")
     parser.add_argument("--quick", action="store_true")
     arguments = parser.parse_args(argv)
+    unknown = [name for name in arguments.robots if name not in known]
+    if unknown:
+        parser.error(f"unknown robot(s) {', '.join(unknown)}; known: {', '.join(known)}")
+    arguments.robots = arguments.robots or known
     folder = robots_folder()
     if folder is None:
         print("example-robot-data is not installed (pip install example-robot-data)")
