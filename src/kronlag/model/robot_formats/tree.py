@@ -1,5 +1,5 @@
 """The kinematic tree of a robot file turned into a :class:`~kronlag.System` in joint coordinates,
-shared by the readers (:mod:`.urdf`, :mod:`.mjcf`).
+shared by the readers (:mod:`.urdf`, :mod:`.mjcf`, :mod:`.sdf`).
 
 A reader gives links (with their :class:`Inertial` in the link frame) and :class:`TreeJoint` s
 (parent, child, the joint frame's placement in the parent link's frame as ``x y z roll pitch
@@ -21,6 +21,7 @@ from xml.etree.ElementTree import Element
 import numpy as np
 import sympy as sp
 
+from ...core.errors import ModelError
 from ..bodies import RigidBody
 from ..frames import GROUND, Frame
 from ..rotations import MAX_ROTATION_FACTORS, RotationSequence
@@ -29,11 +30,8 @@ from .description import JointLimits, RobotDescription, RobotFileWarning, RobotJ
 from .safe_xml import XmlDocument
 
 __all__ = ["Inertial", "NO_MASS", "TreeJoint", "at_reference", "build_system", "check_inertia", "combine", "moved",
-           "orientation_rows", "report_skipped",
-           "rpy_matrix", "rpy_of", "transform"]
+           "orientation_rows", "report_skipped", "rpy_matrix", "rpy_of", "transform"]
 
-#: Relative tolerance of the physical checks of an inertial (as kronlag.model.bodies).
-_PHYSICAL_TOLERANCE = 1e-9
 
 @dataclass(frozen=True)
 class Inertial:
@@ -45,7 +43,6 @@ class Inertial:
 
 
 NO_MASS = Inertial(0.0, np.zeros(3), np.zeros((3, 3)))
-
 
 
 def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -197,18 +194,15 @@ def _compact(factors: list) -> list:
 
 
 def check_inertia(document: XmlDocument, element: Element, mass: float, tensor: np.ndarray) -> None:
-    """ModelFileError at ``element`` unless ``mass >= 0`` and ``tensor`` is positive semidefinite with
-    principal moments satisfying the triangle inequality (a mass distribution has them)."""
-    if mass < 0:
-        raise document.error(element, f"<inertial>: mass = {mass:g} is negative")
-    moments = np.linalg.eigvalsh(tensor)
-    tolerance = _PHYSICAL_TOLERANCE * max(1e-300, np.abs(moments).max())
-    shown = ", ".join(f"{value:.6g}" for value in moments)
-    if moments[0] < -tolerance:
-        raise document.error(element, f"<inertia>: the tensor is not positive definite (principal moments {shown})")
-    if moments[0] + moments[1] < moments[2] - tolerance:
-        raise document.error(element, f"<inertia>: the principal moments {shown} violate the triangle inequality "
-                                      "I1 + I2 >= I3: no mass distribution has them")
+    """ModelFileError at ``element`` unless the inertial is physical: kronlag's checks of a rigid
+    body (:meth:`kronlag.RigidBody.check_values`: mass not negative, tensor positive semidefinite,
+    principal moments satisfying the triangle inequality)."""
+    body = RigidBody("inertial", mass=sp.Float(mass), inertia=sp.Matrix((tensor + tensor.T) / 2),
+                     position=(0, 0, 0), rotation=sp.eye(3))
+    try:
+        body.check_values(lambda value, what: float(value))
+    except ModelError as error:
+        raise document.error(element, "<inertial>: " + str(error).removeprefix("body 'inertial': ")) from None
 
 
 def rpy_of(rotation: np.ndarray) -> tuple[float, float, float]:
