@@ -419,7 +419,8 @@ SDF_HINGE = ('<joint name="hinge" type="revolute"><parent>world</parent><child>a
     (SDF_LINK + SDF_HINGE.replace("<child>arm", "<child>nope"), r"<child>nope</child> is not a link"),
     (SDF_LINK.replace("<link name=\"arm\">", '<link name="arm"><pose relative_to="nowhere">0 0 0 0 0 0</pose>')
      + SDF_HINGE, r"relative_to='nowhere' is not a link or joint"),
-    (SDF_LINK.replace("<mass>1</mass>", "<mass>-1</mass>") + SDF_HINGE, r"<link name='arm'>: <inertial>: mass = -1 .*must not be negative"),
+    (SDF_LINK.replace("<mass>1</mass>", "<mass>-1</mass>") + SDF_HINGE,
+     r"<link name='arm'>: <inertial>: mass = -1 .*must not be negative"),
 ])
 def test_bad_sdf(tmp_path, model, expected):
     path = sdf(tmp_path, model)
