@@ -256,7 +256,7 @@ def main(argv=None) -> int:
         failed |= row["max_rel"] > 1e-9 and row["worst"] != "soft"
         print(f"{row['robot']:<16}{row['bodies']:>7}{row['coordinates']:>7}{row['constraints']:>7}{row['mobility']:>5}"
               f"{row['load_s']:>8.2f}{row['derive_s']:>10.2f}{row['build_s']:>9.2f}{row['max_rel']:>14.2e}"
-              f"{row['worst']:>6}{row['fd_us']:>9.2f}{row['aba_us']:>8.2f}{row['fd_us'] / row['aba_us']:>8.2f}",
+              f"{row['worst']:>8}{row['fd_us']:>9.2f}{row['aba_us']:>8.2f}{row['fd_us'] / row['aba_us']:>8.2f}",
               flush=True)
     if failed:
         print("MISMATCH: a difference above 1e-9")
