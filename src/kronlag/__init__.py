@@ -42,6 +42,7 @@ from .model.free_bodies import FreeBody, free_body, mechanism  # noqa: E402
 from .model.joints import Joint  # noqa: E402
 from .model.loads import Damper, Spring  # noqa: E402
 from .model.modelfile import load_model  # noqa: E402
+from .model.robot_formats import load_mjcf, load_sdf, load_urdf  # noqa: E402
 from .model.rotations import RotationSequence  # noqa: E402
 from .model.symbols import acceleration_symbol, coordinates, speed_symbol, t  # noqa: E402
 from .model.system import System  # noqa: E402
@@ -79,6 +80,9 @@ __all__ = [
     "derive",
     "Equations",
     "load_model",
+    "load_urdf",
+    "load_mjcf",
+    "load_sdf",
     "System",
     "LimitEvent",
     "PlanarBody",

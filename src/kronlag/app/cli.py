@@ -1,7 +1,9 @@
 """Command-line interface: a thin shell over the Python API.
 
 MODEL is the name of a built-in model or shipped example (``kronlag models``
-lists them) or the path of a TOML model file (format: :mod:`kronlag.modelfile`).
+lists them) or the path of a TOML model file (format: :mod:`kronlag.modelfile`) or of a robot
+file (``.urdf``: :func:`kronlag.load_urdf`; ``.xml`` MJCF: :func:`kronlag.load_mjcf`; ``.sdf``:
+:func:`kronlag.load_sdf`).
 
 Exit status: 0 success; 2 bad input, found before any computation (one line
 on stderr, no traceback); 1 the run did not complete: a numerical failure or an
@@ -93,7 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
         sub = subparsers.add_parser(name, help=summary, description=summary)
         sub.set_defaults(handler=handler)
         if model:
-            sub.add_argument("model", metavar="MODEL", help="built-in model name or path of a TOML model file")
+            sub.add_argument("model", metavar="MODEL", help="built-in model name or path of a TOML model file or a .urdf, .xml (MJCF) or .sdf robot file")
         return sub
 
     commands.add_commands(command)

@@ -194,6 +194,8 @@ def _check(arguments: argparse.Namespace) -> None:
         print(check.report())
         raise ModelError(f"{model.source}: [initial]: the initial state cannot be assembled: {check.assembly_error}")
     print(f"{model.source}: valid model file")
+    if getattr(model.system, "robot", None) is not None:  # a robot file: its structure first
+        print(model.system.describe())
     print(check.report())
 
 

@@ -173,6 +173,10 @@ def euler_parameters_of(rotation) -> np.ndarray:
 #: matrix, and every derivative of it, grow beyond what :func:`kronlag.derive` handles quickly.
 MAX_ROTATION_FACTORS = 16
 
+#: How far ``|u|^2`` of an axis of floating-point numbers may be from 1: the rounding of a
+#: normalized float vector (a few units in the last place), not a tolerance for a wrong axis.
+_UNIT_ROUNDING = 1e-15
+
 _PRINCIPAL_AXES = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1)}
 
 
@@ -223,7 +227,7 @@ class RotationSequence:
                 axis = _PRINCIPAL_AXES[axis]
             vector = as_vector(axis, f"{what} factor {k} axis", (3,))
             norm_error = sp.simplify((vector.T * vector)[0, 0] - 1)
-            if norm_error != 0:
+            if norm_error != 0 and not (norm_error.is_Float and abs(norm_error) <= _UNIT_ROUNDING):
                 raise ModelError(f"{what} factor {k}: the axis {list(vector)} is not a unit vector "
                                  f"(|u|^2 - 1 = {norm_error})")
             checked.append((vector, as_scalar(angle, f"{what} factor {k} angle")))

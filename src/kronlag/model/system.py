@@ -41,6 +41,7 @@ from .loads import (
     Potential,
     Spring,
 )
+from .structure import describe
 from .symbols import MULTIPLIER_NAME, acceleration_symbol, check_name, speed_symbol, t
 
 __all__ = ["System", "DrawingLine", "drive_name"]
@@ -199,6 +200,11 @@ class System:
     forces = _loads_of(AppliedForce, "The applied forces, torques and generalized forces, in the order added.")
 
     # -- building -----------------------------------------------------------
+
+    def describe(self) -> str:
+        """The structure report: bodies, joints, loop-closing constraints, Grübler count
+        (:func:`kronlag.model.structure.describe`)."""
+        return describe(self)
 
     def add_body(self, body: Body) -> Body:
         """Add a body (a :class:`~kronlag.model.bodies.Body`: a PlanarBody, RigidBody, PointMass...);

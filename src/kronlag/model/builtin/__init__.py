@@ -16,6 +16,7 @@ from pathlib import Path
 from ...core.errors import ModelError
 from ..modelfile import ModelFile, load_model
 from ..modelfile.model_file import settle_drives
+from ..modelfile.reader import ROBOT_SUFFIXES
 from ..system import System
 from .arms import panda, ur5
 from .planar import (
@@ -117,6 +118,6 @@ def resolve_model(model: str | Path) -> ModelFile:
     """A model given as a path to a TOML file or as the name of a built-in model or example, its
     ``[[drives]]`` left out of the system (the command line applies them where it uses them)."""
     path = Path(model)
-    if path.suffix == ".toml" or path.exists():
+    if path.suffix in (".toml", *ROBOT_SUFFIXES) or path.exists():
         return load_model(path, apply_drives=False)
     return load_example(str(model), apply_drives=False)

@@ -17,6 +17,7 @@ import sympy as sp
 from ...core.errors import ExpressionError, ModelError, ModelFileError
 from ..bodies import BODY_TYPES, Body
 from ..expressions import RESERVED_NAMES, parse_expression
+from ..robot_formats import ROBOT_READERS, load_robot
 from ..symbols import speed_symbol, t
 from ..system import System, drive_name
 from .bounds import check_document, check_text, read_bounded
@@ -437,4 +438,20 @@ def load_model(path: str | Path, *, apply_drives: bool | None = None) -> ModelFi
         entry and the problem.
     """
     path = Path(path)
+    if path.suffix.lower() in ROBOT_SUFFIXES:
+        return _robot_model(path)
     return settle_drives(loads_model(read_bounded(path), source=str(path)), apply_drives)
+
+
+#: Suffixes :func:`load_model` reads as robot description files (:mod:`kronlag.model.robot_formats`).
+ROBOT_SUFFIXES = tuple(ROBOT_READERS)
+
+
+def _robot_model(path: Path) -> ModelFile:
+    """A robot file (URDF, MJCF) as a model file: its system, ``g`` (9.81 or the file's), actuator
+    torques 0, the reference pose as the assembly guess."""
+    system = load_robot(path)
+    robot = system.robot
+    return ModelFile(system, description=f"{robot.format.upper()} robot {system.name!r} ({path.name})",
+                     values={name: sp.Float(value) for name, value in robot.values.items()},
+                     q_guess={name: sp.Float(value) for name, value in robot.q_reference.items()}, source=str(path))

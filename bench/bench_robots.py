@@ -1,0 +1,267 @@
+#!/usr/bin/env python3
+"""Robots from example-robot-data read with ``kronlag.load_urdf``: derive + build time, agreement
+with Pinocchio and forward-dynamics time against ``pin.aba``, in one run.
+
+Run by hand (needs ``pip install pin example-robot-data``)::
+
+    python3 bench/bench_robots.py                 # every robot of ROBOTS
+    python3 bench/bench_robots.py panda ur5       # some of them
+    python3 bench/bench_robots.py --quick         # 100 times fewer timed calls
+
+For each robot: the System is loaded from the URDF as shipped, derived and compiled (times
+printed); Pinocchio's model is built from the same file (``buildModelFromUrdf``, mimic joints as
+ordinary joints).  At random states (joint values in [-1.5, 1.5], speeds in [-2, 2]) kronlag's
+``M``, ``g`` and ``C qd`` are compared with ``crba``, ``computeGeneralizedGravity`` and
+``nonLinearEffects - g``, and its forward dynamics with ``aba`` (with a mimic joint: with the
+exact solution of ``M qdd + Phi_q^T lambda = tau - nle``, ``Phi_q qdd = 0`` built from
+Pinocchio's M and nle).  Continuous joints have Pinocchio coordinates ``(cos q, sin q)``.  The
+relative difference is ``max |kronlag - pinocchio| / max(1, max |pinocchio|)`` over the states.
+
+With ``pip install mujoco`` two MJCF rows follow (``tests/robot_files``): the spatial arm
+``arm.xml`` read with ``kronlag.load_mjcf`` against ``mj_fullM`` and ``qfrc_bias`` (FD timed
+against ``mj_forward``, which does more: collisions, sensors), and the four-bar ``four_bar.xml``
+closed by a ``connect``: kronlag's exact accelerations against MuJoCo's soft closure (the
+difference printed is MuJoCo's error; the tests check kronlag against a hand-built four-bar).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import importlib.util
+import sys
+import time
+import timeit
+from pathlib import Path
+
+import numpy as np
+
+import kronlag
+
+#: name -> path under example-robot-data's robots folder
+ROBOTS = {
+    "ur5": "ur_description/urdf/ur5_robot.urdf",
+    "panda": "panda_description/urdf/panda.urdf",
+    "z1": "z1_description/urdf/z1.urdf",
+    "so100": "so_arm_description/urdf/so100.urdf",
+    "kinova": "kinova_description/robots/kinova.urdf",
+    "double_pendulum": "double_pendulum_description/urdf/double_pendulum.urdf",
+    "xarm7": "xarm_description/urdf/xarm7.urdf",
+    "ur3": "ur_description/urdf/ur3_robot.urdf",
+}
+
+
+def robots_folder() -> Path | None:
+    """example-robot-data's ``robots`` folder (the pip package installs it under ``cmeel.prefix``), or None."""
+    try:
+        distribution = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        return None
+    folder = Path(str(distribution.locate_file("cmeel.prefix/share/example-robot-data/robots")))
+    return folder if folder.is_dir() else None
+
+
+class PinocchioReference:
+    """Pinocchio's model of a URDF and the map from kronlag's joint coordinates to its q and v."""
+
+    def __init__(self, path: Path, system: kronlag.System):
+        import pinocchio as pin
+
+        self.pin = pin
+        self.model = pin.buildModelFromUrdf(str(path))
+        self.data = self.model.createData()
+        self.slots = []  # (q index, v index, nq) per kronlag coordinate
+        by_coordinate = {joint.coordinate: joint.name for joint in system.robot.joints if joint.coordinate}
+        for coordinate in system.coordinates:
+            joint = self.model.joints[self.model.getJointId(by_coordinate[coordinate.name])]
+            self.slots.append((joint.idx_q, joint.idx_v, joint.nq))
+        if sorted(slot[1] for slot in self.slots) != list(range(self.model.nv)):
+            raise RuntimeError(f"{path}: the joints of kronlag and Pinocchio do not match")
+
+    def q(self, q: np.ndarray) -> np.ndarray:
+        result = np.zeros(self.model.nq)
+        for value, (iq, _, nq) in zip(q, self.slots):
+            result[iq:iq + nq] = (np.cos(value), np.sin(value)) if nq == 2 else value
+        return result
+
+    def v(self, qd: np.ndarray) -> np.ndarray:
+        result = np.zeros(self.model.nv)
+        result[[slot[1] for slot in self.slots]] = qd
+        return result
+
+    def back(self, vector: np.ndarray) -> np.ndarray:
+        """A v-indexed vector (or matrix) in kronlag's coordinate order."""
+        index = [slot[1] for slot in self.slots]
+        return vector[np.ix_(index, index)] if vector.ndim == 2 else vector[index]
+
+    def terms(self, q, qd, tau) -> dict[str, np.ndarray]:
+        pin, model, data = self.pin, self.model, self.data
+        pq, pv, ptau = self.q(q), self.v(qd), self.v(tau)
+        mass = pin.crba(model, data, pq)
+        mass = np.triu(mass) + np.triu(mass, 1).T
+        gravity = pin.computeGeneralizedGravity(model, data, pq).copy()
+        bias = pin.nonLinearEffects(model, data, pq, pv).copy()
+        return {"M": self.back(mass), "g": self.back(gravity), "Cqd": self.back(bias - gravity),
+                "aba": self.back(pin.aba(model, data, pq, pv, ptau).copy())}
+
+
+def constrained_accelerations(mass, rhs, jacobian) -> np.ndarray:
+    """``qdd`` of ``M qdd + J^T lambda = rhs``, ``J qdd = 0`` (constant-coefficient constraints)."""
+    m, r = mass.shape[0], jacobian.shape[0]
+    matrix = np.block([[mass, jacobian.T], [jacobian, np.zeros((r, r))]])
+    return np.linalg.solve(matrix, np.concatenate([rhs, np.zeros(r)]))[:m]
+
+
+def on_mimics(system: kronlag.System, values: np.ndarray, *, speeds: bool = False) -> np.ndarray:
+    """Coordinates (or speeds) with each mimic joint's set from its leader: ``multiplier * q + offset``."""
+    index = {q.name: k for k, q in enumerate(system.coordinates)}
+    result = np.array(values, dtype=float)
+    for joint in system.robot.joints:
+        if joint.mimic is not None:
+            leader = system.robot.joint(joint.mimic[0]).coordinate
+            result[index[joint.coordinate]] = joint.mimic[1] * result[index[leader]] + (0 if speeds else joint.mimic[2])
+    return result
+
+
+def compare(path: Path, system: kronlag.System, model, tau: np.ndarray, *, states: int = 5,
+            seed: int = 1) -> dict[str, float]:
+    """The largest relative difference of M, g, C qd and the accelerations to Pinocchio at random states."""
+    reference = PinocchioReference(path, system)
+    rng = np.random.default_rng(seed)
+    worst = {"M": 0.0, "g": 0.0, "Cqd": 0.0, "qdd": 0.0}
+    m = len(system.coordinates)
+    for _ in range(states):
+        q, qd = rng.uniform(-1.5, 1.5, m), rng.uniform(-2, 2, m)
+        q, qd = on_mimics(system, q), on_mimics(system, qd, speeds=True)
+        ours = {"M": model.M(q), "g": model.g(q), "Cqd": model.Cqd(q, qd)}
+        theirs = reference.terms(q, qd, tau)
+        accelerations = model.forward_dynamics(q, qd).qdd
+        expected = theirs["aba"] if not system.constraints else constrained_accelerations(
+            theirs["M"], tau - theirs["g"] - theirs["Cqd"], model.Phi_q(q))
+        ours["qdd"], theirs["qdd"] = accelerations, expected
+        for key in worst:
+            scale = max(1.0, float(np.abs(theirs[key]).max()))
+            worst[key] = max(worst[key], float(np.abs(ours[key] - theirs[key]).max()) / scale)
+    return worst
+
+
+def per_call(function, *, number: int) -> float:
+    return min(timeit.repeat(function, number=number, repeat=5)) / number * 1e6
+
+
+def run(name: str, path: Path, *, quick: bool) -> dict:
+    start = time.perf_counter()
+    system = kronlag.load_urdf(path)
+    loaded = time.perf_counter()
+    equations = kronlag.derive(system)
+    derived = time.perf_counter()
+    rng = np.random.default_rng(7)
+    tau = np.array([rng.uniform(-1, 1) if symbol else 0.0 for symbol in
+                    (joint.torque for joint in system.robot.joints if joint.coordinate)])
+    values = {**system.robot.values, **{joint.torque: float(value) for joint, value in
+                                        zip([j for j in system.robot.joints if j.coordinate], tau) if joint.torque}}
+    model = equations.numeric(values)
+    built = time.perf_counter()
+    worst = compare(path, system, model, tau)
+    reference = PinocchioReference(path, system)
+    q, qd = rng.uniform(-1, 1, len(system.coordinates)), rng.uniform(-1, 1, len(system.coordinates))
+    pq, pv, ptau = reference.q(q), reference.v(qd), reference.v(tau)
+    number = 200 if quick else 20000
+    ours = per_call(lambda: model.forward_dynamics(q, qd), number=number)
+    theirs = per_call(lambda: reference.pin.aba(reference.model, reference.data, pq, pv, ptau), number=number)
+    m = len(system.coordinates)
+    return {"robot": name, "bodies": len(system.bodies), "coordinates": m, "constraints": len(system.constraints),
+            "mobility": model.mobility(on_mimics(system, np.zeros(m))),
+            "load_s": loaded - start, "derive_s": derived - loaded, "build_s": built - derived,
+            "max_rel": max(worst.values()), "worst": max(worst, key=worst.get), "fd_us": ours, "aba_us": theirs}
+
+
+FILES = Path(__file__).resolve().parents[1] / "tests" / "robot_files"
+
+
+def run_mjcf(name: str, *, quick: bool) -> dict:
+    """An MJCF row: ``arm`` (tree, M and C qd + g against MuJoCo) or ``four_bar`` (closed loop: the
+    accelerations against MuJoCo's soft closure at an assembled state)."""
+    import mujoco
+
+    path = FILES / f"{name}.xml"
+    start = time.perf_counter()
+    system = kronlag.load_mjcf(path)
+    loaded = time.perf_counter()
+    equations = kronlag.derive(system)
+    derived = time.perf_counter()
+    model = equations.numeric(system.robot.values)
+    built = time.perf_counter()
+    peer = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(peer)
+    names = [joint.name for joint in system.robot.joints if joint.coordinate]
+    qpos, dof = [peer.joint(n).qposadr[0] for n in names], [peer.joint(n).dofadr[0] for n in names]
+    m = len(names)
+    rng = np.random.default_rng(11)
+    worst = 0.0
+    if system.constraints:
+        q, qd = model.assemble([0.3] + [0.0] * (m - 1), fixed={names[0]: 0.3}, qd_guess=[1.0] + [0.0] * (m - 1),
+                               qd_fixed={names[0]: 1.0})
+        data.qpos[qpos], data.qvel[dof] = q, qd
+        mujoco.mj_forward(peer, data)
+        ours = model.forward_dynamics(q, qd).qdd
+        worst, what = float(np.abs(data.qacc[dof] - ours).max() / np.abs(ours).max()), "soft"
+    else:
+        what = "M,bias"
+        for _ in range(5):
+            q, qd = rng.uniform(-1, 1, m), rng.uniform(-1, 1, m)
+            data.qpos[qpos], data.qvel[dof] = q, qd
+            mujoco.mj_forward(peer, data)
+            mass = np.zeros((peer.nv, peer.nv))
+            mujoco.mj_fullM(peer, data, mass)
+            mass, bias = mass[np.ix_(dof, dof)], data.qfrc_bias[dof]
+            worst = max(worst, float(np.abs(model.M(q) - mass).max() / np.abs(mass).max()),
+                        float(np.abs(model.Cqd(q, qd) + model.g(q) - bias).max() / max(1.0, np.abs(bias).max())))
+    number = 200 if quick else 20000
+    ours_us = per_call(lambda: model.forward_dynamics(q, qd), number=number)
+    theirs_us = per_call(lambda: mujoco.mj_forward(peer, data), number=number)
+    return {"robot": f"{name}.xml", "bodies": len(system.bodies), "coordinates": m,
+            "constraints": len(system.constraints), "mobility": model.mobility(q), "load_s": loaded - start,
+            "derive_s": derived - loaded, "build_s": built - derived, "max_rel": worst, "worst": what,
+            "fd_us": ours_us, "aba_us": theirs_us}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    known = [*ROBOTS, "arm", "four_bar"]
+    parser.add_argument("robots", nargs="*", help=f"some of {', '.join(known)} (default: all)")
+    parser.add_argument("--quick", action="store_true")
+    arguments = parser.parse_args(argv)
+    unknown = [name for name in arguments.robots if name not in known]
+    if unknown:
+        parser.error(f"unknown robot(s) {', '.join(unknown)}; known: {', '.join(known)}")
+    arguments.robots = arguments.robots or known
+    folder = robots_folder()
+    if folder is None:
+        print("example-robot-data is not installed (pip install example-robot-data)")
+        return 1
+    print(f"{'robot':<16}{'bodies':>7}{'coords':>7}{'constr':>7}{'mob':>5}{'load s':>8}{'derive s':>10}"
+          f"{'build s':>9}{'max rel diff':>14}{'(in)':>8}{'FD us':>9}{'peer us':>8}{'ratio':>8}")
+    print("peer: Pinocchio (crba, gravity, nonLinearEffects, aba) for URDF; MuJoCo (mj_fullM, qfrc_bias, mj_forward) "
+          "for .xml; 'soft' = MuJoCo's soft loop closure against kronlag's exact one")
+    failed = False
+    for name in arguments.robots:
+        if name in ROBOTS:
+            row = run(name, folder / ROBOTS[name], quick=arguments.quick)
+        elif importlib.util.find_spec("mujoco") is None:
+            print(f"{name}: skipped (pip install mujoco)")
+            continue
+        else:
+            row = run_mjcf(name, quick=arguments.quick)
+        failed |= row["max_rel"] > 1e-9 and row["worst"] != "soft"
+        print(f"{row['robot']:<16}{row['bodies']:>7}{row['coordinates']:>7}{row['constraints']:>7}{row['mobility']:>5}"
+              f"{row['load_s']:>8.2f}{row['derive_s']:>10.2f}{row['build_s']:>9.2f}{row['max_rel']:>14.2e}"
+              f"{row['worst']:>8}{row['fd_us']:>9.2f}{row['aba_us']:>8.2f}{row['fd_us'] / row['aba_us']:>8.2f}",
+              flush=True)
+    if failed:
+        print("MISMATCH: a difference above 1e-9")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

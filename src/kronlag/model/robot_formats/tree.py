@@ -1,0 +1,395 @@
+"""The kinematic tree of a robot file turned into a :class:`~kronlag.System` in joint coordinates,
+shared by the readers (:mod:`.urdf`, :mod:`.mjcf`, :mod:`.sdf`).
+
+A reader gives links (with their :class:`Inertial` in the link frame) and :class:`TreeJoint` s
+(parent, child, the joint frame's placement in the parent link's frame as ``x y z roll pitch
+yaw``, the kind and axis); :func:`build_system` places every link with the joint coordinates:
+the root link is the ``ground``, ``fixed`` joints merge their child into the parent's body (masses
+and inertias added by the parallel-axis theorem), a ``revolute`` (or ``continuous``) joint turns
+its child about the axis, a ``prismatic`` one slides it.  Each body's rotation is a
+:class:`~kronlag.RotationSequence` of the placements' elementary rotations and the joint axes, so
+that its angular velocity needs no simplification; an angle that is the double nearest to a
+multiple of pi/2 is taken exactly (:func:`exact_angle`), which keeps the expressions small.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from xml.etree.ElementTree import Element
+
+import numpy as np
+import sympy as sp
+
+from ...core.errors import ModelError
+from ..bodies import RigidBody
+from ..frames import GROUND, Frame
+from ..rotations import MAX_ROTATION_FACTORS, RotationSequence
+from ..system import System
+from .description import JointLimits, RobotDescription, RobotFileWarning, RobotJoint, Visual, coordinate_name
+from .safe_xml import XmlDocument
+
+__all__ = ["Inertial", "NO_MASS", "TreeJoint", "at_reference", "build_system", "check_inertia", "combine", "moved",
+           "orientation_rows", "report_skipped", "rpy_matrix", "rpy_of", "transform"]
+
+
+@dataclass(frozen=True)
+class Inertial:
+    """Mass, centre of mass and central inertia tensor in a link's frame."""
+
+    mass: float
+    centre: np.ndarray
+    tensor: np.ndarray
+
+
+NO_MASS = Inertial(0.0, np.zeros(3), np.zeros((3, 3)))
+
+
+def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """URDF's fixed-axis roll, pitch, yaw: ``R = Rz(yaw) Ry(pitch) Rx(roll)``."""
+    c, s = np.cos([roll, pitch, yaw]), np.sin([roll, pitch, yaw])
+    rx = np.array([[1, 0, 0], [0, c[0], -s[0]], [0, s[0], c[0]]])
+    ry = np.array([[c[1], 0, s[1]], [0, 1, 0], [-s[1], 0, c[1]]])
+    rz = np.array([[c[2], -s[2], 0], [s[2], c[2], 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def exact_angle(value: float) -> sp.Expr:
+    """An angle of the file: ``k pi/2`` exactly where ``value`` is the double nearest to it (the file
+    means it; the difference is below double rounding, and exact zeros keep the expressions small),
+    else the number as given."""
+    quarter = round(value / (np.pi / 2))
+    if abs(value - quarter * (np.pi / 2)) <= 4 * np.finfo(float).eps * max(1.0, abs(value)):
+        return quarter * sp.pi / 2
+    return sp.Float(value)
+
+
+def rpy_factors(roll: float, pitch: float, yaw: float) -> list[tuple[str, sp.Expr]]:
+    """The elementary rotations of an ``rpy`` (zero angles left out), as RotationSequence factors."""
+    return [(axis, exact_angle(angle)) for axis, angle in (("z", yaw), ("y", pitch), ("x", roll)) if angle != 0]
+
+
+
+def transform(origin: tuple[float, ...]) -> np.ndarray:
+    matrix = np.eye(4)
+    matrix[:3, :3] = rpy_matrix(*origin[3:])
+    matrix[:3, 3] = origin[:3]
+    return matrix
+
+
+
+def combine(parts: list[Inertial]) -> Inertial:
+    """The inertial of rigidly joined parts (all in one frame): total mass, centre of mass, and the
+    central tensor by the parallel-axis theorem."""
+    mass = sum(part.mass for part in parts)
+    if mass == 0:
+        return Inertial(0.0, np.zeros(3), sum((part.tensor for part in parts), np.zeros((3, 3))))
+    centre = sum(part.mass * part.centre for part in parts) / mass
+    tensor = np.zeros((3, 3))
+    for part in parts:
+        d = part.centre - centre
+        tensor += part.tensor + part.mass * (d @ d * np.eye(3) - np.outer(d, d))
+    return Inertial(mass, centre, (tensor + tensor.T) / 2)
+
+
+def moved(part: Inertial, transform: np.ndarray) -> Inertial:
+    """``part`` given in a frame placed by ``transform``, expressed in the outer frame."""
+    rotation = transform[:3, :3]
+    return Inertial(part.mass, transform[:3, :3] @ part.centre + transform[:3, 3],
+                     rotation @ part.tensor @ rotation.T)
+
+
+@dataclass
+class TreeJoint:
+    """A joint of the tree as a reader gives it: ``kind`` ``revolute``, ``continuous``,
+    ``prismatic`` or ``fixed``; ``origin`` the joint frame in the parent link's frame
+    (``x y z roll pitch yaw``); ``axis`` a unit vector in the joint frame; ``mimic``
+    ``(leader, multiplier, offset)`` declared by ``mimic_element``; ``element`` names it in errors."""
+
+    element: Element
+    name: str
+    kind: str
+    parent: str
+    child: str
+    origin: tuple[float, ...]
+    axis: tuple[float, float, float]
+    limits: JointLimits = JointLimits()
+    mimic: tuple[str, float, float] | None = None
+    mimic_element: Element | None = None
+
+
+def _joint_factors(joint: TreeJoint, coordinate: sp.Symbol) -> list[tuple[object, sp.Expr]]:
+    """The rotation of a revolute or continuous joint as RotationSequence factors: about its axis, a
+    principal axis where the axis is one."""
+    axis = np.array(joint.axis)
+    for index, name in enumerate("xyz"):
+        if abs(axis[index]) == 1.0:
+            return [(name, coordinate if axis[index] > 0 else -coordinate)]
+    # a general axis u = Rz(phi) Ry(theta) e_z: R_u(q) = Rz(phi) Ry(theta) Rz(q) Ry(-theta) Rz(-phi)
+    theta, phi = float(np.arccos(np.clip(axis[2], -1, 1))), float(np.arctan2(axis[1], axis[0]))
+    turn = [("z", exact_angle(phi)), ("y", exact_angle(theta))]
+    back = [("y", exact_angle(-theta)), ("z", exact_angle(-phi))]
+    return [factor for factor in (*turn, ("z", coordinate), *back) if factor[1] != 0]
+
+
+@dataclass
+class _Placement:
+    """A link frame: world origin and rotation (expressions of q), its rotation's factors, its body."""
+
+    origin: sp.Matrix
+    rotation: sp.Matrix
+    factors: list
+    body: str
+    in_body: np.ndarray  # the link frame in its body's link frame (fixed joints), 4x4
+    points: list  # joint origins from the root, for the drawing
+
+
+def _body_rotation(placement: _Placement):
+    """The body's rotation: its factors as a RotationSequence; a chain of more than
+    MAX_ROTATION_FACTORS factors is rewritten with the constant rotations moved to its end
+    (``C R_a(q) = R_{C a}(q) C``): one factor per joint about its axis at q = 0, then the constant
+    rest as at most three; a body that does not turn keeps its constant matrix."""
+    factors = placement.factors
+    if not factors:
+        return placement.rotation
+    if len(factors) > MAX_ROTATION_FACTORS:
+        moved, constant = [], np.eye(3)
+        for axis, angle in factors:
+            unit = np.array(_PRINCIPAL[axis] if isinstance(axis, str) else axis, dtype=float)
+            if angle.free_symbols:
+                moved.append((tuple(sp.Float(x) for x in constant @ unit / np.linalg.norm(constant @ unit)), angle))
+            else:
+                constant = constant @ np.array(RotationSequence([(axis, angle)]).matrix, dtype=float)
+        factors = moved + _matrix_factors(constant)
+    return RotationSequence(factors)
+
+
+_PRINCIPAL = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1)}
+
+
+def _matrix_factors(matrix: np.ndarray) -> list:
+    """A constant rotation matrix as (at most three) factors ``Rz(yaw) Ry(pitch) Rx(roll)``."""
+    yaw, pitch, roll = (float(np.arctan2(matrix[1, 0], matrix[0, 0])), float(np.arcsin(np.clip(-matrix[2, 0], -1, 1))),
+                        float(np.arctan2(matrix[2, 1], matrix[2, 2])))
+    return rpy_factors(roll, pitch, yaw)
+
+
+def _compact(factors: list) -> list:
+    """``factors`` with every run of more than three constant rotations replaced by three (z, y, x)."""
+    result, run = [], []
+
+    def flush():
+        result.extend(run if len(run) <= 3 else _matrix_factors(np.array(RotationSequence(run).matrix, dtype=float)))
+        run.clear()
+
+    for factor in factors:
+        if factor[1].free_symbols:
+            flush()
+            result.append(factor)
+        else:
+            run.append(factor)
+    flush()
+    return result
+
+
+
+def check_inertia(document: XmlDocument, element: Element, mass: float, tensor: np.ndarray) -> None:
+    """ModelFileError at ``element`` unless the inertial is physical: kronlag's checks of a rigid
+    body (:meth:`kronlag.RigidBody.check_values`: mass not negative, tensor positive semidefinite,
+    principal moments satisfying the triangle inequality)."""
+    body = RigidBody("inertial", mass=sp.Float(mass), inertia=sp.Matrix((tensor + tensor.T) / 2),
+                     position=(0, 0, 0), rotation=sp.eye(3))
+    try:
+        body.check_values(lambda value, what: float(value))
+    except ModelError as error:
+        raise document.error(element, "<inertial>: " + str(error).removeprefix("body 'inertial': ")) from None
+
+
+def rpy_of(rotation: np.ndarray) -> tuple[float, float, float]:
+    """``(roll, pitch, yaw)`` with ``rpy_matrix(roll, pitch, yaw) == rotation`` (to rounding)."""
+    return (float(np.arctan2(rotation[2, 1], rotation[2, 2])), float(np.arcsin(np.clip(-rotation[2, 0], -1, 1))),
+            float(np.arctan2(rotation[1, 0], rotation[0, 0])))
+
+
+def _tree(document: XmlDocument, links: dict[str, Element], joints: list[TreeJoint]) -> str:
+    """The root link; errors for unknown links, loops and several roots."""
+    by_child: dict[str, TreeJoint] = {}
+    names: set[str] = set()
+    for joint in joints:
+        if joint.name in names:
+            raise document.error(joint.element, "a second joint of this name")
+        names.add(joint.name)
+        for link in (joint.parent, joint.child):
+            if link not in links:
+                raise document.error(joint.element, f"names the link {link!r}, which the file does not define")
+        if joint.child in by_child:
+            raise document.error(joint.element, f"link {joint.child!r} already has the parent joint "
+                                                f"{by_child[joint.child].name!r}: a tree has no loops")
+        by_child[joint.child] = joint
+    roots = [name for name in links if name not in by_child]
+    if not roots:
+        raise document.error(document.root, "the joints form a loop: no link is a root")
+    if len(roots) > 1:
+        raise document.error(links[roots[1]], f"a second root link: {len(roots)} links ({', '.join(roots)}) have "
+                                              "no parent joint; a robot has one root, joined to every other link")
+    return roots[0]
+
+
+def build_system(document: XmlDocument, *, name: str, file_format: str, links: dict[str, Element],
+                 inertials: dict[str, Inertial], specs: list[TreeJoint],
+                 visuals: list[tuple[str, str, tuple[float, ...], np.ndarray, str | None]],
+                 gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)) -> System:
+    """The System of a kinematic tree in joint coordinates, with its :class:`RobotDescription`
+    (``system.robot``); ``visuals`` are ``(link, shape, size, pose in the link frame, filename)``;
+    ``gravity`` is the file's (the parameter ``g`` is its magnitude, its direction is kept).
+    The reader reports the skipped elements (:func:`report_skipped`) once it is done.
+
+    Raises
+    ------
+    ModelFileError
+        Naming the element: an unknown link, a link with two parents, two roots, a mimic of an
+        unknown joint, a zero-mass leaf.
+    """
+    root = _tree(document, links, specs)
+    children: dict[str, list[TreeJoint]] = {link: [] for link in links}
+    for spec in specs:
+        children[spec.parent].append(spec)
+    order = _depth_first(root, children)
+
+    moving = [spec for spec in order if spec.kind != "fixed"]
+    if not moving:
+        raise document.error(document.root, "has no moving joint: nothing to simulate")
+    taken: set[str] = set()
+    coordinate_of: dict[str, sp.Symbol] = {}
+    for spec in moving:
+        symbol = coordinate_name(spec.name, taken)
+        taken.update({symbol, symbol + "d", symbol + "dd"})
+        coordinate_of[spec.name] = sp.Symbol(symbol)
+    for spec in moving:
+        if spec.mimic is not None and (spec.mimic[0] not in coordinate_of or spec.mimic[0] == spec.name):
+            known = "a fixed joint" if any(s.name == spec.mimic[0] for s in specs) else "not a joint of the file"
+            raise document.error(spec.mimic_element, f"of joint {spec.name!r}: {spec.mimic[0]!r} is "
+                                 f"{known if spec.mimic[0] != spec.name else 'the joint itself'}")
+    actuated = [spec for spec in moving if spec.mimic is None]
+    torques = {spec.name: sp.Symbol(f"tau_{coordinate_of[spec.name].name}") for spec in actuated}
+    g = sp.Symbol("g")
+    magnitude = float(np.linalg.norm(gravity))
+    direction = np.array(gravity) / magnitude if magnitude > 0 else np.array([0.0, 0.0, -1.0])
+    down = [sp.Integer(int(x)) if x in (-1.0, 0.0, 1.0) else sp.Float(x) for x in direction]
+    system = System(list(coordinate_of.values()), parameters=[g, *torques.values()],
+                    gravity=[g * x for x in down], name=name)
+    placements = {root: _Placement(sp.zeros(3, 1), sp.eye(3), [], GROUND, np.eye(4), [])}
+    parts: dict[str, list[Inertial]] = {}
+    for spec in order:
+        parent = placements[spec.parent]
+        x, y, z, roll, pitch, yaw = spec.origin
+        turn = rpy_factors(roll, pitch, yaw)
+        factors = _compact(parent.factors + turn)
+        rotation = parent.rotation * RotationSequence(turn).matrix if turn else parent.rotation
+        origin = parent.origin + parent.rotation * sp.Matrix([x, y, z])
+        points = parent.points + [origin]
+        if spec.kind == "fixed":
+            in_body = parent.in_body @ transform(spec.origin)
+            placements[spec.child] = _Placement(origin, rotation, factors, parent.body, in_body, points)
+            continue
+        q = coordinate_of[spec.name]
+        if spec.kind == "prismatic":
+            origin = origin + rotation * sp.Matrix(spec.axis) * q
+        else:
+            step = _joint_factors(spec, q)
+            factors = factors + step
+            rotation = rotation * RotationSequence(step).matrix
+        placements[spec.child] = _Placement(origin, rotation, factors, spec.child, np.eye(4), points)
+    for link, placement in placements.items():
+        parts.setdefault(placement.body, []).append(moved(inertials[link], placement.in_body))
+
+    centres: dict[str, sp.Matrix] = {}
+    for spec in moving:
+        inertial = combine(parts[spec.child])
+        placement = placements[spec.child]
+        has_children = any(placements[other.child].body != spec.child and placements[other.parent].body == spec.child
+                           for other in moving)
+        if inertial.mass == 0 and not np.any(inertial.tensor):
+            if not has_children:
+                raise document.error(links[spec.child], f"is a zero-mass leaf: the joint {spec.name!r} moves nothing "
+                                                        "that has mass or inertia (its acceleration is undetermined)")
+            continue
+        centre = placement.origin + placement.rotation * sp.Matrix(inertial.centre)
+        centres[spec.child] = centre
+        system.add_body(RigidBody(spec.child, mass=sp.Float(inertial.mass), inertia=sp.Matrix(inertial.tensor),
+                                  position=centre, rotation=_body_rotation(placement), simplify=False))
+    for spec in moving:
+        if spec.mimic is not None:
+            joint, multiplier, offset = spec.mimic
+            system.add_constraint(coordinate_of[spec.name] - sp.Float(multiplier) * coordinate_of[joint]
+                                  - sp.Float(offset), name=f"{spec.name}.mimic")
+    system.add_generalized_force([torques.get(spec.name, 0) for spec in moving], name="joint torques")
+    _add_drawing(system, order, placements, centres)
+
+    system.robot = RobotDescription(
+        source=document.source, format=file_format, root=root,
+        joints=tuple(RobotJoint(spec.name, spec.kind, spec.parent, spec.child, spec.axis, spec.origin,
+                                coordinate_of[spec.name].name if spec.name in coordinate_of else None, spec.limits,
+                                spec.mimic, torques[spec.name].name if spec.name in torques else None)
+                     for spec in order),
+        body_of_link={name: placement.body for name, placement in placements.items()},
+        visuals=tuple(Visual(link, placements[link].body, shape, size, placements[link].in_body @ pose, filename)
+                      for link, shape, size, pose, filename in visuals),
+        frames={link: Frame(placement.origin, placement.rotation) for link, placement in placements.items()},
+        values={"g": magnitude, **{symbol.name: 0.0 for symbol in torques.values()}},
+        q_reference={coordinate_of[spec.name].name: spec.mimic[2] if spec.mimic else 0.0 for spec in moving},
+        skipped=document.skipped_summary())
+    return system
+
+
+def at_reference(system: System, expression) -> np.ndarray:
+    """A matrix of expressions of the coordinates at the file's reference pose, as floats."""
+    reference = {q: system.robot.q_reference.get(q.name, 0.0) for q in system.coordinates}
+    return np.array(sp.Matrix(expression).subs(reference).evalf(), dtype=float)
+
+
+def orientation_rows(rotation1: sp.Matrix, relative: np.ndarray, rotation2: sp.Matrix) -> list[tuple[str, sp.Expr]]:
+    """The rows ``rx, ry, rz`` that hold ``R2 = R1 relative`` (as kronlag.joints' orientation lock:
+    ``(R1 relative e_y).(R2 e_z)``, ``(R1 relative e_z).(R2 e_x)``, ``(R1 relative e_x).(R2 e_y)``)."""
+    expected, unit = rotation1 * sp.Matrix(relative), sp.eye(3)
+    return [(label, (expected * unit[:, i]).dot(rotation2 * unit[:, j]))
+            for label, i, j in (("rx", 1, 2), ("ry", 2, 0), ("rz", 0, 1))]
+
+
+def report_skipped(document: XmlDocument, system: System) -> None:
+    """Record the elements the reader skipped in ``system.robot`` and warn once, listing them."""
+    system.robot.skipped = document.skipped_summary()
+    if system.robot.skipped:
+        warnings.warn(f"{document.source}: not used by kronlag (skipped): {system.robot.skipped}", RobotFileWarning,
+                      stacklevel=3)
+
+
+
+def _depth_first(root: str, children: dict[str, list[TreeJoint]]) -> list[TreeJoint]:
+    """The joints depth-first from the root, siblings in file order (the order Pinocchio numbers them)."""
+    order: list[TreeJoint] = []
+    stack = list(reversed(children[root]))
+    while stack:
+        spec = stack.pop()
+        order.append(spec)
+        stack.extend(reversed(children[spec.child]))
+    return order
+
+
+def _add_drawing(system: System, order: list[TreeJoint], placements: dict[str, _Placement],
+                 centres: dict[str, sp.Matrix]) -> None:
+    """A stick figure for the animation: a polyline through the joint origins from the root to each
+    leaf link (and on to its centre of mass if it moves), each starting where it leaves the
+    branches drawn before."""
+    drawn: set[int] = set()
+    for spec in order:
+        if any(other.parent == spec.child for other in order):
+            continue  # not a leaf
+        leaf = placements[spec.child]
+        ends = [leaf.origin] + ([centres[spec.child]] if spec.child in centres else [])  # a moving leaf: on to its COM
+        points = leaf.points + [point for point in ends if point != leaf.points[-1]]
+        start = max((index for index, point in enumerate(points) if id(point) in drawn), default=0)
+        line = points[start:]
+        drawn.update(id(point) for point in line)
+        if len(line) >= 2 and any(point.free_symbols for point in line):
+            system.add_drawing_line(line, name=f"{spec.child} branch")
