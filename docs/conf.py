@@ -9,7 +9,7 @@ does, into a temporary directory).  Three parts:
 - the gallery: every script of ``examples/`` (and of a subfolder with a ``README.rst``) run by
   sphinx-gallery at build time and shown with the pictures it writes (``_ext/written_pictures.py``).
 
-What the build generates in ``docs/`` (``api/``, ``gallery/``) is ignored by git.
+What the build generates in ``docs/`` (``api/``, ``gallery/``, ``_build/``) is ignored by git.
 """
 
 from __future__ import annotations
@@ -87,26 +87,43 @@ def public_names() -> dict[str, list[str]]:
 
 
 def write_api_index() -> None:
-    """Write ``api/index.rst`` afresh: an autosummary table with stub pages for each kind of public name.
+    """Write ``api/index.rst``: an autosummary table with stub pages for each kind of public name.
 
-    It is written before Sphinx looks for its sources, so that autosummary generates the stubs; the stubs
-    of an earlier build go with it (a name no longer public would leave a page outside every toctree).
+    It is written before Sphinx looks for its sources, so that autosummary generates the stubs.  A file is
+    written only when its text changes (a rebuild then rereads nothing), and the stub of a name no longer
+    public is removed (its page would be outside every toctree).
     """
-    shutil.rmtree(API, ignore_errors=True)
-    API.mkdir()
+    names = public_names()
     sections = [API_INTRO]
-    for kind, names in public_names().items():
+    for kind, kind_names in names.items():
         template = "   :template: data.rst\n" if kind == "Symbols" else ""
-        entries = "".join(f"   {name}\n" for name in names)
+        entries = "".join(f"   {name}\n" for name in kind_names)
         sections.append(f"{kind}\n{'-' * len(kind)}\n\n.. autosummary::\n   :toctree: generated\n{template}\n{entries}")
-    (API / "index.rst").write_text("\n".join(sections))
+    index = API / "index.rst"
+    API.mkdir(exist_ok=True)
+    if not index.is_file() or index.read_text() != "\n".join(sections):
+        index.write_text("\n".join(sections))
+    public = {f"kronlag.{name}.rst" for kind_names in names.values() for name in kind_names}
+    for stub in (API / "generated").glob("*.rst"):
+        if stub.name not in public:
+            stub.unlink()
 
 
 # The gallery.  sphinx-gallery runs each script in the folder it reads it from, and the scripts write their
-# pictures into their working directory: it reads a fresh copy of examples/ in the build's doctree folder,
-# so that a build writes nothing into the repository's examples/.
+# pictures into their working directory: it reads a fresh copy of examples/ (copy_examples), so that a build
+# writes nothing into the repository's examples/.  It reruns an example only when its text changed.
+EXAMPLES_COPY = DOCS / "_build" / "examples"
+
+
+def copy_examples() -> None:
+    """Copy examples/ (without pictures) to EXAMPLES_COPY, afresh."""
+    shutil.rmtree(EXAMPLES_COPY, ignore_errors=True)
+    shutil.copytree(EXAMPLES, EXAMPLES_COPY,
+                    ignore=shutil.ignore_patterns("__pycache__", "*.png", "*.gif", "*.jpg", "*.svg"))
+
+
 sphinx_gallery_conf = {
-    "examples_dirs": [str(EXAMPLES)],  # replaced by its copy when the builder starts (copy_examples)
+    "examples_dirs": [str(EXAMPLES_COPY)],
     "gallery_dirs": ["gallery"],
     "filename_pattern": r"\.py$",  # run every example: each takes a few seconds
     "image_scrapers": ("written_pictures.scraper",),
@@ -117,14 +134,6 @@ sphinx_gallery_conf = {
 }
 
 
-def copy_examples(app) -> None:
-    """Point sphinx-gallery at a fresh copy of examples/ in the build's doctree folder (see above)."""
-    copy = Path(app.doctreedir) / "examples"
-    shutil.rmtree(copy, ignore_errors=True)
-    shutil.copytree(EXAMPLES, copy, ignore=shutil.ignore_patterns("__pycache__", "*.png", "*.gif", "*.jpg", "*.svg"))
-    app.config.sphinx_gallery_conf["examples_dirs"] = [str(copy)]
-
-
 def setup(app) -> None:
     write_api_index()
-    app.connect("builder-inited", copy_examples, priority=100)  # before sphinx-gallery reads the examples (500)
+    copy_examples()
