@@ -57,6 +57,19 @@ autodoc_typehints = "none"  # the docstrings' Parameters sections give the types
 numpydoc_show_class_members = False
 numpydoc_xref_param_type = False
 
+
+def literal_block_after_summary(app, what, name, obj, options, lines: list[str]) -> None:
+    """Give a literal block announced by the summary (``Solve ... multipliers::``) a paragraph ``::`` of its own.
+
+    numpydoc takes the first paragraph as the summary and dedents what follows, so such a block would lose
+    its indentation and docutils reject it.  Runs before numpydoc's own handler (priority 500).
+    """
+    end = lines.index("") if "" in lines else len(lines)
+    if end and lines[end - 1].endswith("::"):
+        summary = lines[end - 1]
+        lines[end - 1:end] = [summary[:-2].rstrip() if summary.endswith(" ::") else summary[:-1], "", "::"]
+
+
 API = DOCS / "api"
 API_INTRO = """\
 API reference
@@ -86,6 +99,22 @@ def public_names() -> dict[str, list[str]]:
     return {kind: names for kind, names in kinds.items() if names}
 
 
+def symbol_comment(name: str) -> str:
+    """The ``#:`` comment above the assignment of the public symbol ``name`` in the module that defines it."""
+    from sphinx.pycode import ModuleAnalyzer, PycodeError
+
+    value = getattr(kronlag, name)
+    for module_name in sorted(sys.modules):
+        if module_name.startswith("kronlag.") and getattr(sys.modules[module_name], name, None) is value:
+            try:
+                comment = ModuleAnalyzer.for_module(module_name).find_attr_docs().get(("", name))
+            except PycodeError:  # an old module path (kronlag._legacy) has no source of its own
+                continue
+            if comment:
+                return " ".join(comment).strip()
+    raise ValueError(f"kronlag.{name}: no '#:' comment above its assignment")
+
+
 def write_api_index() -> None:
     """Write ``api/index.rst``: an autosummary table with stub pages for each kind of public name.
 
@@ -96,9 +125,11 @@ def write_api_index() -> None:
     names = public_names()
     sections = [API_INTRO]
     for kind, kind_names in names.items():
-        template = "   :template: data.rst\n" if kind == "Symbols" else ""
-        entries = "".join(f"   {name}\n" for name in kind_names)
-        sections.append(f"{kind}\n{'-' * len(kind)}\n\n.. autosummary::\n   :toctree: generated\n{template}\n{entries}")
+        if kind == "Symbols":  # a SymPy symbol has no docstring of its own: its comment, here
+            entries = "".join(f".. py:data:: {name}\n\n   {symbol_comment(name)}\n\n" for name in kind_names)
+        else:
+            entries = ".. autosummary::\n   :toctree: generated\n\n" + "".join(f"   {name}\n" for name in kind_names)
+        sections.append(f"{kind}\n{'-' * len(kind)}\n\n{entries}")
     index = API / "index.rst"
     API.mkdir(exist_ok=True)
     if not index.is_file() or index.read_text() != "\n".join(sections):
@@ -115,16 +146,28 @@ def write_api_index() -> None:
 EXAMPLES_COPY = DOCS / "_build" / "examples"
 
 
+GALLERY = DOCS / "gallery"
+
+
 def copy_examples() -> None:
-    """Copy examples/ (without pictures) to EXAMPLES_COPY, afresh."""
+    """Copy examples/ (without pictures) to EXAMPLES_COPY, afresh; remove the gallery pages of examples
+    that are gone (sphinx-gallery leaves them, outside every toctree)."""
     shutil.rmtree(EXAMPLES_COPY, ignore_errors=True)
     shutil.copytree(EXAMPLES, EXAMPLES_COPY,
                     ignore=shutil.ignore_patterns("__pycache__", "*.png", "*.gif", "*.jpg", "*.svg"))
+    for page in GALLERY.rglob("*.rst"):
+        source = EXAMPLES / page.relative_to(GALLERY)
+        if page.name == "index.rst":  # a folder's page: the folder has a header (README.rst or GALLERY_HEADER.rst)
+            kept = any(source.parent.glob("README.*")) or any(source.parent.glob("GALLERY_HEADER.*"))
+        else:
+            kept = source.with_suffix(".py").is_file()
+        if not kept:
+            page.unlink()
 
 
 sphinx_gallery_conf = {
     "examples_dirs": [str(EXAMPLES_COPY)],
-    "gallery_dirs": ["gallery"],
+    "gallery_dirs": [GALLERY.name],
     "filename_pattern": r"\.py$",  # run every example: each takes a few seconds
     "image_scrapers": ("written_pictures.scraper",),
     "capture_repr": (),  # a script's last line returns a figure or a path: nothing to show
@@ -135,5 +178,6 @@ sphinx_gallery_conf = {
 
 
 def setup(app) -> None:
+    app.connect("autodoc-process-docstring", literal_block_after_summary, priority=400)
     write_api_index()
     copy_examples()

@@ -296,9 +296,7 @@ class NumericModel:
 
     def forward_dynamics(self, q, qd, t: float = 0.0, *, alpha: float = 0.0,
                          beta: float = 0.0) -> ForwardDynamicsResult:
-        """Solve the augmented system for ``qdd`` and the multipliers.
-
-        ::
+        """Solve the augmented system for ``qdd`` and the multipliers::
 
             [[M, Phi_q^T, A^T], [Phi_q, 0, 0], [A, 0, 0]] [qdd; lambda; mu]
                 = [f_Q - C qd - g; gamma - 2 alpha Phi_q qd - beta^2 Phi; gamma_nh - alpha (A qd + b)]
