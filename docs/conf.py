@@ -45,7 +45,6 @@ exclude_patterns = ["_build", "_ext", "Thumbs.db", ".DS_Store"]
 
 html_theme = "furo"
 html_title = f"kronlag {release}"
-html_static_path = ["_static"]
 
 # The pages: GitHub-flavoured Markdown, with heading anchors for the links between pages (`units.md#dimensions`).
 myst_heading_anchors = 3
@@ -144,8 +143,6 @@ def write_api_index() -> None:
 # pictures into their working directory: it reads a fresh copy of examples/ (copy_examples), so that a build
 # writes nothing into the repository's examples/.  It reruns an example only when its text changed.
 EXAMPLES_COPY = DOCS / "_build" / "examples"
-
-
 GALLERY = DOCS / "gallery"
 
 
@@ -168,7 +165,9 @@ def copy_examples() -> None:
 sphinx_gallery_conf = {
     "examples_dirs": [str(EXAMPLES_COPY)],
     "gallery_dirs": [GALLERY.name],
-    "filename_pattern": r"\.py$",  # run every example: each takes a few seconds
+    # Every example runs: each takes 2 to 18 s (flyball_governor, a stiff IFToMM problem, the longest; all of
+    # them together about a minute of CPU time), none so long that leaving it out would pay.
+    "filename_pattern": r"\.py$",
     "image_scrapers": ("written_pictures.scraper",),
     "capture_repr": (),  # a script's last line returns a figure or a path: nothing to show
     "write_computation_times": False,

@@ -37,5 +37,5 @@ def scraper(block, block_vars: dict, gallery_conf: dict) -> str:
         shutil.copyfile(picture, target)
         _shown[picture] = picture.stat().st_mtime_ns
         shown.append(target)
-    return figure_rst([str(path) for path in shown], gallery_conf["src_dir"],
-                      srcsetpaths=[{0: path} for path in shown])
+    # one picture under the other at the page's width (figure_rst would set several side by side, small)
+    return "".join(figure_rst([str(path)], gallery_conf["src_dir"], srcsetpaths=[{0: path}]) for path in shown)
