@@ -1,4 +1,7 @@
-"""IFToMM benchmark A03, Andrews' squeezing mechanism, against the published
+"""Andrews' squeezing mechanism (IFToMM A03)
+=========================================
+
+IFToMM benchmark A03, Andrews' squeezing mechanism, against the published
 solution of the Test Set for IVP Solvers at t = 0.03 s.
 
 Writes ``andrews_squeezer.png``.  Run: ``python3 examples/andrews_squeezer.py``.

@@ -1,4 +1,7 @@
-"""IFToMM benchmark A04, Bricard mechanism (a redundant closure constraint), energy drift.
+"""Bricard mechanism (IFToMM A04)
+==============================
+
+IFToMM benchmark A04, Bricard mechanism (a redundant closure constraint), energy drift.
 
 Writes ``bricard.png``.  Run: ``python3 examples/bricard.py``.
 """

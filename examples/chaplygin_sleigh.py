@@ -1,4 +1,7 @@
-"""Chaplygin sleigh: a nonholonomic knife-edge constraint, multiplier mu(t).
+"""Chaplygin sleigh
+================
+
+Chaplygin sleigh: a nonholonomic knife-edge constraint, multiplier mu(t).
 
 Simulates the shipped model file and writes ``chaplygin_sleigh.png``.
 Run: ``python3 examples/chaplygin_sleigh.py``.

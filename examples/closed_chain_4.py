@@ -1,4 +1,7 @@
-"""Closed chain of four links (a five-bar loop) in absolute angles.
+"""Closed chain of four links
+==========================
+
+Closed chain of four links (a five-bar loop) in absolute angles.
 
 Simulates the shipped model file and writes ``closed_chain_4.png``.
 Run: ``python3 examples/closed_chain_4.py``.

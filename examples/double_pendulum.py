@@ -1,4 +1,7 @@
-"""Double pendulum of two uniform rods: energy is conserved, the motion is chaotic.
+"""Double pendulum
+===============
+
+Double pendulum of two uniform rods: energy is conserved, the motion is chaotic.
 
 Simulates the shipped model file and writes ``double_pendulum.png``.
 Run: ``python3 examples/double_pendulum.py``.

@@ -1,4 +1,7 @@
-"""Five-bar parallel robot: motor torques and joint reactions while the end effector draws a circle.
+"""Five-bar parallel robot: motor torques and joint reactions
+==========================================================
+
+Five-bar parallel robot: motor torques and joint reactions while the end effector draws a circle.
 
 The end effector of the shipped model ``five_bar`` (base joints 0.2 m apart, links 0.2 m
 and 0.3 m, in a vertical plane) is driven once round a circle of radius 5 cm in 1 s: two

@@ -1,4 +1,7 @@
-"""IFToMM benchmark A05, stiff flyball governor, slider height against a Radau reference.
+"""Flyball governor (IFToMM A05)
+=============================
+
+IFToMM benchmark A05, stiff flyball governor, slider height against a Radau reference.
 
 Writes ``flyball_governor.png``.  Run: ``python3 examples/flyball_governor.py``.
 """

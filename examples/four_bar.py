@@ -1,4 +1,7 @@
-"""Four-bar of Van Khang (2011), Section 4.1, end to end.
+"""Four-bar of Van Khang (2011)
+============================
+
+Section 4.1 of the paper, end to end.
 
 Derives the equations (corrected Eqs. 29-34), simulates 3 s from the shipped
 model file and writes ``four_bar.png`` (q, qd, lambda, energy, drift) and

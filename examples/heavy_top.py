@@ -1,4 +1,7 @@
-"""Heavy symmetric top (z-x-z Euler angles): precession and nutation.
+"""Heavy symmetric top
+===================
+
+Heavy symmetric top (z-x-z Euler angles): precession and nutation.
 
 Simulates the shipped model file and writes ``heavy_top.png``.
 Run: ``python3 examples/heavy_top.py``.

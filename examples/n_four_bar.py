@@ -1,4 +1,7 @@
-"""IFToMM benchmark A02, N four-bar mechanism (N = 2), against its exact 1-DOF motion.
+"""N four-bar mechanism (IFToMM A02)
+=================================
+
+IFToMM benchmark A02, N four-bar mechanism (N = 2), against its exact 1-DOF motion.
 
 The mechanism passes through the singular configuration where all bars are
 horizontal; the error shows whether the run stayed on the physical branch.

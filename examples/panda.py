@@ -1,4 +1,7 @@
-"""Franka Emika Panda arm falling under gravity from a bent pose, joints unactuated.
+"""Franka Emika Panda arm
+======================
+
+Franka Emika Panda arm falling under gravity from a bent pose, joints unactuated.
 
 Simulates the shipped model file and writes ``panda.png``.
 Run: ``python3 examples/panda.py``.

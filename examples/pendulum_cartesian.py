@@ -1,4 +1,7 @@
-"""IFToMM benchmark A01, simple pendulum in Cartesian coordinates, against its exact solution.
+"""Pendulum in Cartesian coordinates (IFToMM A01)
+==============================================
+
+IFToMM benchmark A01, simple pendulum in Cartesian coordinates, against its exact solution.
 
 Writes ``pendulum_cartesian.png``.  Run: ``python3 examples/pendulum_cartesian.py``.
 """

@@ -1,4 +1,7 @@
-"""Quick-return mechanism of Van Khang (2011), Section 4.2: crank-driven rocker and slider.
+"""Quick-return mechanism
+======================
+
+Quick-return mechanism of Van Khang (2011), Section 4.2: crank-driven rocker and slider.
 
 Simulates the shipped model file and writes ``quick_return.png``.
 Run: ``python3 examples/quick_return.py``.

@@ -1,4 +1,7 @@
-"""Spatial RSSR linkage written as bodies + joints: the joint reactions of its free motion.
+"""Spatial RSSR linkage: joint reactions
+=====================================
+
+Spatial RSSR linkage written as bodies + joints: the joint reactions of its free motion.
 
 A crank on a vertical hinge (``crank_bearing``) is joined, through a coupler with a ball joint
 at each end (``ball_1``, ``ball_2``), to a rocker on a horizontal hinge (``rocker_bearing``);

@@ -1,4 +1,7 @@
-"""Slider-crank: the crank torque and the reaction forces at the pins.
+"""Slider-crank
+============
+
+Slider-crank: the crank torque and the reaction forces at the pins.
 
 Simulates the shipped model file and writes ``slider_crank.png``.
 Run: ``python3 examples/slider_crank.py``.

@@ -1,4 +1,7 @@
-"""Slider-crank engine written as bodies + joints: bearing reactions over one revolution.
+"""Slider-crank engine: bearing reactions
+======================================
+
+Slider-crank engine written as bodies + joints: bearing reactions over one revolution.
 
 The crank of the shipped model file ``slider_crank_engine`` turns at a constant
 1500 rpm (a drive: inverse dynamics along the prescribed crank angle); the joints' multipliers

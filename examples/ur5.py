@@ -1,4 +1,7 @@
-"""Universal Robots UR5 arm falling under gravity from a bent pose, joints unactuated.
+"""Universal Robots UR5 arm
+========================
+
+Universal Robots UR5 arm falling under gravity from a bent pose, joints unactuated.
 
 Simulates the shipped model file and writes ``ur5.png``.
 Run: ``python3 examples/ur5.py``.

@@ -1,4 +1,7 @@
-"""Minimum-effort swing of the four-bar crank with CasADi and IPOPT.
+"""Minimum-effort swing of the four-bar (CasADi, IPOPT)
+====================================================
+
+Minimum-effort swing of the four-bar crank with CasADi and IPOPT.
 
 The four-bar of ``examples/four_bar.toml`` hangs at rest in its static
 equilibrium (``model.equilibrium``).  Find the crank torque ``tau(t)``,

@@ -182,7 +182,7 @@ _PRINCIPAL_AXES = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1)}
 
 @dataclass(frozen=True)
 class RotationSequence:
-    """A rotation composed of elementary rotations, ``R = R_1(angle_1) R_2(angle_2) ... R_n(angle_n)``.
+    """A rotation composed of elementary rotations, ``R = R_1(angle_1) R_2(angle_2) … R_n(angle_n)``.
 
     ``R_k`` turns by ``angle_k`` (an expression of q and parameters) about the constant unit
     axis ``u_k``.  Because the factors are known, the body-frame angular velocity needs no

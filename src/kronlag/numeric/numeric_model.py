@@ -385,7 +385,7 @@ class NumericModel(MatrixAccessors):
 
         Returns
         -------
-        (N, *shape)
+        ``(N, *shape)``
             ``shape`` that of the single call (``(m, m)`` for ``M``, ``(m,)`` for ``g``, ``(1,)`` for
             ``potential_energy``).
         """

@@ -2,7 +2,7 @@
 
 The derivative of a matrix function with respect to a vector (Definition 1),
 the Kronecker product, the time derivative of a matrix (Theorem 1) and the
-product rule (Theorem 2).  These are the literal formulas of the paper on
+product rule (Theorem 2).  These are the literal formulas of the paper [1]_ on
 SymPy matrices; :func:`kronlag.derive` uses sparse equivalents of them in its
 hot path and the tests check that both agree.
 
