@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..numeric.reactions import Reaction, joint_reaction, reaction_columns
-from .energy import nonconservative_work
+from .energy import friction_work, nonconservative_work
 from .labelled import LabelledArrays, multiplier_columns
 
 if TYPE_CHECKING:
@@ -304,8 +304,14 @@ class Trajectory(ColumnExport):
     @cached_property
     def nonconservative_work(self) -> np.ndarray:
         """``W(t) = integral qd^T (f_Q - Phi_q^T lambda - A^T mu) dt`` from ``t[0]``: the work of applied
-        forces and torques, dampers, generalized forces and drives, shape (N,); see :mod:`kronlag.simulation.energy`."""
+        forces and torques, dampers, generalized forces, joint friction and drives, shape (N,); see :mod:`kronlag.simulation.energy`."""
         return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd, inputs=self.inputs)
+
+    @cached_property
+    def friction_work(self) -> np.ndarray:
+        """``integral Q_f . qd dt`` from ``t[0]``: the work of the joints' friction (negative: energy lost),
+        shape (N,), part of :attr:`nonconservative_work`; zeros without friction (:mod:`kronlag.model.friction`)."""
+        return friction_work(self.model, self.t, self.q, self.qd, self.qdd)
 
     @property
     def energy_balance(self) -> np.ndarray:

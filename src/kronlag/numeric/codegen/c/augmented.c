@@ -85,6 +85,96 @@ static int kronlag_solve(const double *terms, const double *qd, double alpha, do
     return 0;
 }
 
+#ifdef KRONLAG_FRICTION
+/* Joint friction: kronlag.numeric.friction is the reference of this code (the same records, from the
+ * kernel kronlag_friction, and the same steps). |v - (v.u) u| for 3-vectors. */
+static double kronlag_perpendicular(const double *v, const double *u)
+{
+    double along = v[0] * u[0] + v[1] * u[1] + v[2] * u[2], sum = 0.0;
+    for (int i = 0; i < 3; ++i) { double x = v[i] - along * u[i]; sum += x * x; }
+    return sqrt(sum);
+}
+
+/* One joint's friction force (torque) at the multipliers lam and its rate (friction_force in Python). */
+static double kronlag_friction_force(const double *record, const double *lam, double rate)
+{
+    const double *W = record + KRONLAG_M, *rows = W + 36, *u_force = rows + 6, *u_couple = u_force + 3;
+    const double *c = u_couple + 3; /* RECORD_FIELDS: static, kinetic, viscous, stribeck, radius, 1/arm, preload, eps */
+    double own[6], wrench[6];
+    for (int j = 0; j < 6; ++j) own[j] = rows[j] >= 0.0 ? lam[(int)rows[j]] : 0.0;
+    for (int i = 0; i < 6; ++i) {
+        wrench[i] = 0.0;
+        for (int j = 0; j < 6; ++j) wrench[i] += W[i * 6 + j] * own[j];
+    }
+    double load = kronlag_perpendicular(wrench, u_force) + c[5] * kronlag_perpendicular(wrench + 3, u_couple) + c[6];
+    double mu = c[1];
+    if (c[3] > 0.0) { double x = rate / c[3]; mu += (c[0] - c[1]) * exp(-x * x); }
+    mu *= tanh(rate / c[7]);
+    return c[4] * mu * load + c[2] * rate;
+}
+
+/* kronlag_solve with the friction of the joints: the solution is linear in h, so one more solve per joint
+ * gives the change a unit friction force causes, and the friction forces f = phi(lambda(f)) are found
+ * by fixed-point steps to KRONLAG_FRICTION_RTOL.  terms' h is changed and restored.
+ * Returns 0, 1 (singular) or 2 (the friction forces did not converge). */
+static int kronlag_friction_solve(double t, const double *q, const double *qd, const double *p, double *terms,
+                                  double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
+{
+    enum { m = KRONLAG_M, k = KRONLAG_K, nf = KRONLAG_FRICTION, size = KRONLAG_FRICTION_RECORD };
+    double records[nf * size + 1], dqdd[nf][m], dnu[nf][k + 1], rates[nf], forces[nf], lam[k + 1], saved[m];
+    int status = kronlag_solve(terms, qd, alpha, beta, max_rank, qdd, nu, rank);
+    if (status) return status;
+    kronlag_friction(t, q, qd, p, records);
+    double *h = terms + KRONLAG_DYNAMICS_H;
+    memcpy(saved, h, sizeof saved);
+    for (int j = 0; j < nf && !status; ++j) {
+        const double *J = records + j * size;
+        int unused;
+        rates[j] = 0.0;
+        forces[j] = 0.0;
+        for (int i = 0; i < m; ++i) { h[i] = saved[i] - J[i]; rates[j] += J[i] * qd[i]; }
+        status = kronlag_solve(terms, qd, alpha, beta, max_rank, dqdd[j], dnu[j], &unused);
+        for (int i = 0; i < m; ++i) dqdd[j][i] -= qdd[i];
+        for (int i = 0; i < k; ++i) dnu[j][i] -= nu[i];
+    }
+    memcpy(h, saved, sizeof saved);
+    if (status) return status;
+    int converged = 0;
+    for (int step = 0; step < KRONLAG_FRICTION_MAX_ITERATIONS && !converged; ++step) {
+        for (int i = 0; i < k; ++i) {
+            lam[i] = nu[i];
+            for (int j = 0; j < nf; ++j) lam[i] += forces[j] * dnu[j][i];
+        }
+        double change = 0.0, largest = 0.0;
+        for (int j = 0; j < nf; ++j) {
+            double f = kronlag_friction_force(records + j * size, lam, rates[j]);
+            change = fmax(change, fabs(f - forces[j]));
+            largest = fmax(largest, fabs(f));
+            forces[j] = f;
+        }
+        converged = change <= KRONLAG_FRICTION_RTOL * largest;
+    }
+    if (!converged) return 2;
+    for (int j = 0; j < nf; ++j) {
+        for (int i = 0; i < m; ++i) qdd[i] += forces[j] * dqdd[j][i];
+        for (int i = 0; i < k; ++i) nu[i] += forces[j] * dnu[j][i];
+    }
+    return 0;
+}
+#endif
+
+/* The solve at a state: with the joints' friction when the model has any. */
+static int kronlag_solve_at(double t, const double *q, const double *qd, const double *p, double *terms,
+                            double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
+{
+#ifdef KRONLAG_FRICTION
+    return kronlag_friction_solve(t, q, qd, p, terms, alpha, beta, max_rank, qdd, nu, rank);
+#else
+    (void)t; (void)q; (void)p;
+    return kronlag_solve(terms, qd, alpha, beta, max_rank, qdd, nu, rank);
+#endif
+}
+
 /* Forward dynamics with multipliers (Baumgarte alpha, beta), at most max_rank independent rows of
  * [Phi_q; A] (KRONLAG_K: the numerical rank alone decides); 0 on success, 1 if singular. */
 int kronlag_forward_dynamics_ranked(double t, const double *q, const double *qd, const double *p,
@@ -93,7 +183,7 @@ int kronlag_forward_dynamics_ranked(double t, const double *q, const double *qd,
     double terms[KRONLAG_DYNAMICS_SIZE + 1], nu[KRONLAG_K + 1];
     int rank;
     kronlag_dynamics(t, q, qd, p, terms);
-    int status = kronlag_solve(terms, qd, alpha, beta, max_rank, qdd, nu, &rank);
+    int status = kronlag_solve_at(t, q, qd, p, terms, alpha, beta, max_rank, qdd, nu, &rank);
     for (int j = 0; j < KRONLAG_R; ++j) lam[j] = nu[j];
     for (int j = 0; j < KRONLAG_S; ++j) mu[j] = nu[KRONLAG_R + j];
     return status;
@@ -107,12 +197,15 @@ int kronlag_forward_dynamics(double t, const double *q, const double *qd, const 
 }
 
 /* Entry point for Python: in = [t, alpha, beta, q (m), qd (m), p (P)], out = [qdd (m), lambda (r), mu (s)];
- * returns the rank of [Phi_q; A], or -1 when the configuration is singular. */
+ * returns the rank of [Phi_q; A], -1 when the configuration is singular, -2 when the joints' friction
+ * forces did not converge. */
 int kronlag_forward_dynamics_packed(const double *in, double *out)
 {
     double terms[KRONLAG_DYNAMICS_SIZE + 1];
     int rank;
     const double *q = in + 3, *qd = q + KRONLAG_M;
     kronlag_dynamics(in[0], q, qd, qd + KRONLAG_M, terms);
-    return kronlag_solve(terms, qd, in[1], in[2], KRONLAG_K, out, out + KRONLAG_M, &rank) ? -1 : rank;
+    int status = kronlag_solve_at(in[0], q, qd, qd + KRONLAG_M, terms, in[1], in[2], KRONLAG_K, out, out + KRONLAG_M,
+                                  &rank);
+    return status ? -status : rank;
 }
