@@ -46,7 +46,7 @@ if TYPE_CHECKING:
     from .joints import Joint
     from .system import System
 
-__all__ = ["Friction", "FRICTION_KINDS", "FRICTION_LAWS", "RECORD_FIELDS", "record_size", "friction_record"]
+__all__ = ["Friction", "FRICTION_FIELDS", "check_friction", "FRICTION_KINDS", "FRICTION_LAWS", "RECORD_FIELDS", "record_size", "friction_record"]
 
 #: The joint kinds that take friction, by dimension.
 FRICTION_KINDS = {2: ("revolute", "prismatic"), 3: ("revolute", "prismatic")}
@@ -138,6 +138,10 @@ class Friction:
         return {**self.expressions(), "law": self.law}
 
 
+#: The fields of :class:`Friction` (a model file's ``friction`` table takes the same keys).
+FRICTION_FIELDS = tuple(field.name for field in fields(Friction))
+
+
 def check_friction(system: System, friction: Friction, kind: str, what: str) -> None:
     """Refuse friction on a joint kind without it, a revolute joint without a radius, and symbols that are
     not parameters (raises ModelError naming ``what``)."""
@@ -153,6 +157,22 @@ def check_friction(system: System, friction: Friction, kind: str, what: str) -> 
         raise ModelError(f"{what}: a prismatic joint's friction does not use a radius")
     for name, value in friction.expressions().items():
         system._check_symbols(value, f"{what} friction {name}", allow_q=False)
+
+
+def friction_uses(joint: Joint) -> list[tuple[str, sp.Expr, dict[str, int]]]:
+    """``(field, value, dimension)`` of every quantity of ``joint``'s friction, the dimension as powers of
+    the base dimensions (:class:`kronlag.model.dimensions.Dimension`): coefficients dimensionless,
+    ``radius`` and ``arm`` lengths, ``preload`` a force; the velocities have the rate's dimension (1/time
+    for a revolute joint, length/time for a prismatic one) and ``viscous`` a torque or force per rate."""
+    revolute = joint.kind == "revolute"
+    rate = {"[time]": -1} if revolute else {"[length]": 1, "[time]": -1}
+    force = {"[mass]": 1, "[length]": 2 if revolute else 1, "[time]": -2}
+    viscous = {base: force.get(base, 0) - rate.get(base, 0) for base in ("[mass]", "[length]", "[time]")}
+    dimensions = {"static": {}, "kinetic": {}, "radius": {"[length]": 1}, "arm": {"[length]": 1},
+                  "preload": {"[mass]": 1, "[length]": 1, "[time]": -2}, "viscous": viscous,
+                  "stribeck_velocity": rate, "smoothing_velocity": rate}
+    friction = joint.friction.expressions() if joint.friction is not None else {}
+    return [(field, value, dimensions[field]) for field, value in friction.items()]
 
 
 def record_size(m: int) -> int:
