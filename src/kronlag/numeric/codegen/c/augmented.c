@@ -7,9 +7,12 @@
  * start: off the constraint manifold (an integrator's state between projections) the rows of
  * redundant constraints are no longer exactly dependent, and counting them as independent would
  * solve a nearly singular system (accelerations of order drift / rounding).
+ * count right-hand sides share the factorization: the first [h; c], the others [forcing_e; 0] with
+ * forcing (count - 1 vectors of m) -- the response to a generalized force (joint friction); the
+ * solutions go to qdd (count x m) and nu (count x (K + 1)).
  * Returns 0, or 1 when M is not positive definite on the null space of G. */
-static int kronlag_solve(const double *terms, const double *qd, double alpha, double beta, int max_rank,
-                         double *qdd, double *nu, int *rank)
+static int kronlag_solve_many(const double *terms, const double *qd, double alpha, double beta, int max_rank,
+                              int count, const double *forcing, double *qdd, double *nu, int *rank)
 {
     enum { m = KRONLAG_M, r = KRONLAG_R, s = KRONLAG_S, k = KRONLAG_K };
     const double *M = terms + KRONLAG_DYNAMICS_M, *h = terms + KRONLAG_DYNAMICS_H, *Phi = terms + KRONLAG_DYNAMICS_PHI;
@@ -17,7 +20,7 @@ static int kronlag_solve(const double *terms, const double *qd, double alpha, do
     const double *gamma = terms + KRONLAG_DYNAMICS_GAMMA;
     const double *A = terms + KRONLAG_DYNAMICS_A, *b = terms + KRONLAG_DYNAMICS_B;
     const double *gamma_nh = terms + KRONLAG_DYNAMICS_GAMMA_NH;
-    double X[m * (k + 1)], tau[k + 1], c[k + 1], B[m * m], y[m];
+    double X[m * (k + 1)], tau[k + 1], c[k + 1], B[m * m];
     int perm[k + 1];
     /* X = G^T (m x k), c = [gamma - 2 alpha (Phi_q qd + Phi_t) - beta^2 Phi; gamma_nh - alpha (A qd + b)] */
     for (int j = 0; j < k; ++j) {
@@ -34,54 +37,58 @@ static int kronlag_solve(const double *terms, const double *qd, double alpha, do
     int rho = rank_of(magnitudes, steps);
     if (rho > max_rank) rho = max_rank;
     *rank = rho;
-    /* B = Q^T M Q, y = Q^T h with Q = H_0 ... H_{rho-1}; Z = Q[:, rho:] spans the null space of G. */
+    /* B = Q^T M Q with Q = H_0 ... H_{rho-1}; Z = Q[:, rho:] spans the null space of G. */
     memcpy(B, M, sizeof B);
-    memcpy(y, h, sizeof y);
-    for (int j = 0; j < rho; ++j) {
-        house_reflect_symmetric(X, m, k, j, tau[j], B);
-        house_apply(X, m, k, j, tau[j], y, 1);
-    }
-    /* R1^T = W T (second QR, K x rho), so that G = P R1^T Q1^T. Constraint part y1 = Q1^T qdd:
-     * T y1 = W^T P^T c (least squares when redundant rows are inconsistent). */
-    double W[(k + 1) * (k + 1)], wtau[k + 1], cp[k + 1];
-    for (int i = 0; i < k; ++i) {
-        cp[i] = c[perm[i]];
+    for (int j = 0; j < rho; ++j) house_reflect_symmetric(X, m, k, j, tau[j], B);
+    /* R1^T = W T (second QR, K x rho), so that G = P R1^T Q1^T. */
+    double W[(k + 1) * (k + 1)], wtau[k + 1];
+    for (int i = 0; i < k; ++i)
         for (int j = 0; j < rho; ++j) W[i * k + j] = i >= j ? X[j * k + i] : 0.0;
-    }
     house_qr(W, k, rho, k, NULL, wtau);
-    for (int j = 0; j < rho; ++j) house_apply(W, k, k, j, wtau[j], cp, 1);
-    double qt[m];
-    for (int i = rho - 1; i >= 0; --i) {
-        double sum = cp[i];
-        for (int j = i + 1; j < rho; ++j) sum -= W[i * k + j] * qt[j];
-        qt[i] = sum / W[i * k + i];
-    }
-    /* Null-space part y2: (Z^T M Z) y2 = Z^T h - Z^T M Q1 y1, Cholesky (fails if singular). */
+    /* Z^T M Z = B22 by Cholesky, in place (fails if singular); B21 and the rows 0..rho-1 are kept. */
     int n = m - rho;
-    double *B22 = B + rho * m + rho, *z = qt + rho;
-    for (int i = 0; i < n; ++i) {
-        double sum = y[rho + i];
-        for (int j = 0; j < rho; ++j) sum -= B[(rho + i) * m + j] * qt[j];
-        z[i] = sum;
-    }
-    /* the multipliers below need the rows 0..rho-1 of B only: B22 may be factorized in place */
+    double *B22 = B + rho * m + rho;
     if (cholesky_upper(B22, n, m)) return 1;
-    cholesky_solve(B22, n, m, z);
-    /* Multipliers, minimum norm: R1 P^T nu = Q1^T (h - M qdd) = y1 - B[:rho, :] qt,
-     * R1 = T^T W^T, so P^T nu = W T^{-T} (Q1^T (h - M qdd)). */
-    double a[k + 1];
-    for (int i = 0; i < rho; ++i) {
-        double sum = y[i];
-        for (int j = 0; j < m; ++j) sum -= B[i * m + j] * qt[j];
-        for (int j = 0; j < i; ++j) sum -= W[j * k + i] * a[j];
-        a[i] = sum / W[i * k + i];
+    for (int e = 0; e < count; ++e) {
+        double y[m], cp[k + 1], qt[m + 1], a[k + 1];
+        /* y = Q^T h; constraint part y1 = Q1^T qdd: T y1 = W^T P^T c (least squares when redundant
+         * rows are inconsistent). */
+        memcpy(y, e == 0 ? h : forcing + (e - 1) * m, sizeof y);
+        for (int j = 0; j < rho; ++j) house_apply(X, m, k, j, tau[j], y, 1);
+        if (e == 0) {
+            for (int i = 0; i < k; ++i) cp[i] = c[perm[i]];
+            for (int j = 0; j < rho; ++j) house_apply(W, k, k, j, wtau[j], cp, 1);
+            for (int i = rho - 1; i >= 0; --i) {
+                double sum = cp[i];
+                for (int j = i + 1; j < rho; ++j) sum -= W[i * k + j] * qt[j];
+                qt[i] = sum / W[i * k + i];
+            }
+        } else {
+            for (int i = 0; i < rho; ++i) qt[i] = 0.0; /* c = 0: no constraint part */
+        }
+        /* Null-space part y2: (Z^T M Z) y2 = Z^T h - Z^T M Q1 y1. */
+        double *z = qt + rho;
+        for (int i = 0; i < n; ++i) {
+            double sum = y[rho + i];
+            for (int j = 0; j < rho; ++j) sum -= B[(rho + i) * m + j] * qt[j];
+            z[i] = sum;
+        }
+        cholesky_solve(B22, n, m, z);
+        /* Multipliers, minimum norm: R1 P^T nu = Q1^T (h - M qdd) = y1 - B[:rho, :] qt,
+         * R1 = T^T W^T, so P^T nu = W T^{-T} (Q1^T (h - M qdd)). */
+        for (int i = 0; i < rho; ++i) {
+            double sum = y[i];
+            for (int j = 0; j < m; ++j) sum -= B[i * m + j] * qt[j];
+            for (int j = 0; j < i; ++j) sum -= W[j * k + i] * a[j];
+            a[i] = sum / W[i * k + i];
+        }
+        for (int i = rho; i < k; ++i) a[i] = 0.0;
+        for (int j = rho - 1; j >= 0; --j) house_apply(W, k, k, j, wtau[j], a, 1);
+        for (int i = 0; i < k; ++i) nu[e * (k + 1) + perm[i]] = a[i];
+        /* qdd = Q qt */
+        for (int j = rho - 1; j >= 0; --j) house_apply(X, m, k, j, tau[j], qt, 1);
+        memcpy(qdd + e * m, qt, m * sizeof *qt);
     }
-    for (int i = rho; i < k; ++i) a[i] = 0.0;
-    for (int j = rho - 1; j >= 0; --j) house_apply(W, k, k, j, wtau[j], a, 1);
-    for (int i = 0; i < k; ++i) nu[perm[i]] = a[i];
-    /* qdd = Q qt */
-    for (int j = rho - 1; j >= 0; --j) house_apply(X, m, k, j, tau[j], qt, 1);
-    memcpy(qdd, qt, sizeof qt);
     return 0;
 }
 
@@ -95,83 +102,107 @@ static double kronlag_perpendicular(const double *v, const double *u)
     return sqrt(sum);
 }
 
-/* One joint's friction force (torque) at the multipliers lam and its rate (friction_force in Python). */
-static double kronlag_friction_force(const double *record, const double *lam, double rate)
+/* One joint's wrench W lambda_J (6: force, couple) at the multipliers lam. */
+static void kronlag_friction_wrench(const double *record, const double *lam, double *wrench)
 {
-    const double *W = record + KRONLAG_M, *rows = W + 36, *u_force = rows + 6, *u_couple = u_force + 3;
-    const double *c = u_couple + 3; /* RECORD_FIELDS: static, kinetic, viscous, stribeck, radius, 1/arm, preload, eps */
-    double own[6], wrench[6];
+    const double *W = record + KRONLAG_M, *rows = W + 36;
+    double own[6];
     for (int j = 0; j < 6; ++j) own[j] = rows[j] >= 0.0 ? lam[(int)rows[j]] : 0.0;
     for (int i = 0; i < 6; ++i) {
         wrench[i] = 0.0;
         for (int j = 0; j < 6; ++j) wrench[i] += W[i * 6 + j] * own[j];
     }
-    double load = kronlag_perpendicular(wrench, u_force) + c[5] * kronlag_perpendicular(wrench + 3, u_couple) + c[6];
-    double mu = c[1];
-    if (c[3] > 0.0) { double x = rate / c[3]; mu += (c[0] - c[1]) * exp(-x * x); }
-    mu *= tanh(rate / c[7]);
-    return c[4] * mu * load + c[2] * rate;
 }
 
-/* kronlag_solve with the friction of the joints: the solution is linear in h, so one more solve per joint
- * gives the change a unit friction force causes, and the friction forces f = phi(lambda(f)) are found
- * by fixed-point steps to KRONLAG_FRICTION_RTOL.  terms' h is changed and restored.
- * Returns 0, 1 (singular) or 2 (the friction forces did not converge). */
-static int kronlag_friction_solve(double t, const double *q, const double *qd, const double *p, double *terms,
+/* The fields after J_rate (m), W (36) and the rows (6): u_force (3), u_couple (3), then RECORD_FIELDS:
+ * static, kinetic, viscous, stribeck_velocity, radius, 1/arm, preload, smoothing_velocity. */
+#define KRONLAG_FRICTION_FIELDS(record) ((record) + KRONLAG_M + 48)
+
+/* r mu(v): the factor of the normal load in one joint's friction force at the rate v. */
+static double kronlag_friction_coefficient(const double *record, double rate)
+{
+    const double *c = KRONLAG_FRICTION_FIELDS(record);
+    double mu = c[1];
+    if (c[3] > 0.0) { double x = rate / c[3]; mu += (c[0] - c[1]) * exp(-x * x); }
+    return c[4] * mu * tanh(rate / c[7]);
+}
+
+/* The normal load N from the joint's wrench (friction_force in kronlag.numeric.friction). */
+static double kronlag_friction_load(const double *record, const double *wrench)
+{
+    const double *u_force = record + KRONLAG_M + 42, *u_couple = u_force + 3, *c = KRONLAG_FRICTION_FIELDS(record);
+    return kronlag_perpendicular(wrench, u_force) + c[5] * kronlag_perpendicular(wrench + 3, u_couple) + c[6];
+}
+
+/* The solve with the friction of the joints: the solution is linear in h, so the responses to a
+ * unit friction force of each joint (the forcing -J_j, right-hand sides sharing the factorization)
+ * give the solution for any friction forces f, and f = phi(lambda(f)) is found by fixed-point steps
+ * to KRONLAG_FRICTION_RTOL.  Returns 0, 1 (singular) or 2 (the friction forces did not converge). */
+static int kronlag_friction_solve(double t, const double *q, const double *qd, const double *p, const double *terms,
                                   double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
 {
     enum { m = KRONLAG_M, k = KRONLAG_K, nf = KRONLAG_FRICTION, size = KRONLAG_FRICTION_RECORD };
-    double records[nf * size + 1], dqdd[nf][m], dnu[nf][k + 1], rates[nf], forces[nf], lam[k + 1], saved[m];
-    int status = kronlag_solve(terms, qd, alpha, beta, max_rank, qdd, nu, rank);
-    if (status) return status;
+    double records[nf * size + 1], forcing[nf * m], accelerations[(nf + 1) * m], multipliers[(nf + 1) * (k + 1)];
+    double rates[nf], forces[nf];
     kronlag_friction(t, q, qd, p, records);
-    double *h = terms + KRONLAG_DYNAMICS_H;
-    memcpy(saved, h, sizeof saved);
-    for (int j = 0; j < nf && !status; ++j) {
+    for (int j = 0; j < nf; ++j) {
         const double *J = records + j * size;
-        int unused;
         rates[j] = 0.0;
         forces[j] = 0.0;
-        for (int i = 0; i < m; ++i) { h[i] = saved[i] - J[i]; rates[j] += J[i] * qd[i]; }
-        status = kronlag_solve(terms, qd, alpha, beta, max_rank, dqdd[j], dnu[j], &unused);
-        for (int i = 0; i < m; ++i) dqdd[j][i] -= qdd[i];
-        for (int i = 0; i < k; ++i) dnu[j][i] -= nu[i];
+        for (int i = 0; i < m; ++i) { forcing[j * m + i] = -J[i]; rates[j] += J[i] * qd[i]; }
     }
-    memcpy(h, saved, sizeof saved);
+    int status = kronlag_solve_many(terms, qd, alpha, beta, max_rank, nf + 1, forcing, accelerations, multipliers,
+                                    rank);
     if (status) return status;
+    const double *dqdd = accelerations + m, *dnu = multipliers + (k + 1);
+    /* per joint j: its wrench without friction and per unit friction force of joint i (linear in f),
+     * the factor r mu(v_j) and the viscous force: each step is then a few flops a joint */
+    double wrench[nf][6], response[nf][nf][6], factor[nf], viscous[nf];
+    for (int j = 0; j < nf; ++j) {
+        const double *record = records + j * size;
+        kronlag_friction_wrench(record, multipliers, wrench[j]);
+        for (int i = 0; i < nf; ++i) kronlag_friction_wrench(record, dnu + i * (k + 1), response[j][i]);
+        factor[j] = kronlag_friction_coefficient(record, rates[j]);
+        viscous[j] = KRONLAG_FRICTION_FIELDS(record)[2] * rates[j];
+    }
     int converged = 0;
     for (int step = 0; step < KRONLAG_FRICTION_MAX_ITERATIONS && !converged; ++step) {
-        for (int i = 0; i < k; ++i) {
-            lam[i] = nu[i];
-            for (int j = 0; j < nf; ++j) lam[i] += forces[j] * dnu[j][i];
-        }
-        double change = 0.0, largest = 0.0;
+        double change = 0.0, largest = 0.0, updated[nf];
         for (int j = 0; j < nf; ++j) {
-            double f = kronlag_friction_force(records + j * size, lam, rates[j]);
-            change = fmax(change, fabs(f - forces[j]));
-            largest = fmax(largest, fabs(f));
-            forces[j] = f;
+            double total[6];
+            for (int a = 0; a < 6; ++a) {
+                total[a] = wrench[j][a];
+                for (int i = 0; i < nf; ++i) total[a] += forces[i] * response[j][i][a];
+            }
+            updated[j] = factor[j] * kronlag_friction_load(records + j * size, total) + viscous[j];
+            change = fmax(change, fabs(updated[j] - forces[j]));
+            largest = fmax(largest, fabs(updated[j]));
         }
+        for (int j = 0; j < nf; ++j) forces[j] = updated[j];
         converged = change <= KRONLAG_FRICTION_RTOL * largest;
     }
     if (!converged) return 2;
-    for (int j = 0; j < nf; ++j) {
-        for (int i = 0; i < m; ++i) qdd[i] += forces[j] * dqdd[j][i];
-        for (int i = 0; i < k; ++i) nu[i] += forces[j] * dnu[j][i];
+    for (int i = 0; i < m; ++i) {
+        qdd[i] = accelerations[i];
+        for (int j = 0; j < nf; ++j) qdd[i] += forces[j] * dqdd[j * m + i];
+    }
+    for (int i = 0; i < k; ++i) {
+        nu[i] = multipliers[i];
+        for (int j = 0; j < nf; ++j) nu[i] += forces[j] * dnu[j * (k + 1) + i];
     }
     return 0;
 }
 #endif
 
 /* The solve at a state: with the joints' friction when the model has any. */
-static int kronlag_solve_at(double t, const double *q, const double *qd, const double *p, double *terms,
+static int kronlag_solve_at(double t, const double *q, const double *qd, const double *p, const double *terms,
                             double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
 {
 #ifdef KRONLAG_FRICTION
     return kronlag_friction_solve(t, q, qd, p, terms, alpha, beta, max_rank, qdd, nu, rank);
 #else
     (void)t; (void)q; (void)p;
-    return kronlag_solve(terms, qd, alpha, beta, max_rank, qdd, nu, rank);
+    return kronlag_solve_many(terms, qd, alpha, beta, max_rank, 1, NULL, qdd, nu, rank);
 #endif
 }
 
