@@ -299,3 +299,58 @@ def test_methods_without_friction_refuse_it():
     model = kronlag.derive(_incline(0.3, 0.2, 1e-3)).numeric({"m": 2.0, "g": G}, backend="python")
     with pytest.raises(kronlag.InputError, match="method='ggl' cannot run this model: a model without joint friction"):
         kronlag.simulate(model, (0, 0.1), np.zeros(3), np.zeros(3), method="ggl")
+
+
+def test_trajectory_columns_and_plot_show_the_friction(tmp_path):
+    model = kronlag.derive(_incline(0.5, 0.2, 1e-3)).numeric({"m": 2.0, "g": G})
+    trajectory, _ = _slide(model, 0.5, 1.0, 0.2)
+    columns = trajectory.columns()
+    np.testing.assert_allclose(columns["guide.normal_load"], 2.0 * G * np.cos(0.5), rtol=1e-10)
+    np.testing.assert_allclose(columns["guide.friction"], 0.2 * 2.0 * G * np.cos(0.5), rtol=1e-10)
+    figure = trajectory.plot(path=tmp_path / "run.png")
+    titles = [axes.get_title() for axes in figure.axes]
+    assert "joint friction (force or torque)" in titles
+
+
+@pytest.mark.parametrize("kind", ["revolute", "prismatic"])
+def test_spatial_friction_is_the_force_or_torque_along_the_axis_against_the_rate(kind):
+    """A body on a tilted spatial joint at a moving state: the friction's generalized force equals that of
+    the torque (revolute) or force (prismatic) -f along the world axis applied to the body at the joint,
+    with f = r mu_k N + c v, N = |F_perp| + |T_perp or T| / arm, from the reaction at the solution."""
+    m, g = sp.symbols("m g")
+    inertia = sp.Matrix([[0.05, 0.01, 0], [0.01, 0.07, 0.002], [0, 0.002, 0.03]])
+    axis = np.array([1 / 3, 2 / 3, 2 / 3])
+    arm = 0.1 if kind == "revolute" else 1.0  # a short arm of a guide wedges it (a loop gain above 1)
+    friction = kronlag.Friction(kinetic=0.3, viscous=0.05, arm=arm, smoothing_velocity=1e-6,
+                                **({"radius": 0.02} if kind == "revolute" else {}))
+
+    def build(with_friction: bool):
+        body = free_body("b", mass=m, inertia=inertia, dimension=3, rotation="xyz", simplify=False)
+        system = mechanism([body], parameters=[m, g], gravity=(0, 0, -g))
+        system.add_joint(kind, "ground", "b", at_a=(0.1, 0, 0.2), at_b=(0.2, -0.1, 0.3), axis=tuple(axis),
+                         name="joint", friction=friction if with_friction else None)
+        return system
+
+    model = kronlag.derive(build(True)).numeric({"m": 1.5, "g": G}, backend="python")
+    guess = [0, 0, 0, 1.0, 2.0, 2.0] if kind == "revolute" else [*(0.7 * axis), 0, 0, 0]
+    q, qd = model.assemble(np.zeros(6), qd_guess=guess)
+    solution = model.forward_dynamics(q, qd)
+    columns = friction_columns(model, 0.0, q, qd, solution.lam)
+    f, rate = columns["joint.friction"][0], columns["joint.rate"][0]
+    reaction = joint_reaction(model, "joint", [0.0], q[None], solution.lam[None])
+    F, T = reaction.force[0], reaction.torque[0]
+    u = axis  # the ground's axis: the world axis
+    if kind == "revolute":
+        load = np.linalg.norm(F - (F @ u) * u) + np.linalg.norm(T - (T @ u) * u) / arm
+        assert f == pytest.approx(0.02 * 0.3 * load + 0.05 * rate, rel=1e-10)
+    else:
+        load = np.linalg.norm(F - (F @ u) * u) + np.linalg.norm(T) / arm
+        assert f == pytest.approx(0.3 * load + 0.05 * rate, rel=1e-10)
+    assert abs(rate) > 0.5
+    plain = build(False)
+    if kind == "revolute":
+        plain.add_torque("b", list(-f * u), name="friction")
+    else:
+        plain.add_force(plain.joints[0].point, list(-f * u), name="friction")
+    reference = kronlag.derive(plain).numeric({"m": 1.5, "g": G}, backend="python").forward_dynamics(q, qd)
+    np.testing.assert_allclose(solution.qdd, reference.qdd, rtol=1e-9, atol=1e-9)

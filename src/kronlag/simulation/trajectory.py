@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..numeric.friction import friction_columns, friction_joints
 from ..numeric.reactions import Reaction, joint_reaction, reaction_columns
 from .energy import friction_work, nonconservative_work
 from .labelled import LabelledArrays, multiplier_columns
@@ -351,6 +352,8 @@ class Trajectory(ColumnExport):
         if self.limit_forces is not None:  # limits: each side's contact force
             sides = [side.name for limit in self.model.equations.system.limits for side in limit.sides]
             columns.update({f"{side}.force": self.limit_forces[:, i] for i, side in enumerate(sides)})
+        if friction_joints(self.model.equations.system):  # joint friction: force, normal load and rate by joint
+            columns.update(friction_columns(self.model, self.t, self.q, self.qd, self.lam))
         return columns
 
     def reaction(self, name: str, *, frame: str = "world") -> Reaction:
