@@ -9,7 +9,7 @@ same factorization up to rounding)::
 
     qdd(f) = qdd_0 + sum_j f_j qdd_j,   nu(f) = nu_0 + sum_j f_j nu_j,   f = phi(lambda(f))
 
-and the small nonlinear system in ``f`` (one unknown per joint with friction) is solved by fixed-point
+and the small nonlinear system in ``f`` (one unknown per joint with friction) is solved by Newton
 steps to :data:`~kronlag.numeric.tolerances.FRICTION_RTOL` at every evaluation (never lagged).  This
 module is the Python backend's form and the reference of ``kronlag_friction_solve`` in
 ``numeric/codegen/c/augmented.c``; both read the records of :func:`kronlag.model.friction.friction_record`.
@@ -50,35 +50,61 @@ def _split(record: np.ndarray, m: int) -> dict:
     return parts
 
 
-def _perpendicular(vector: np.ndarray, unit: np.ndarray) -> float:
-    return float(np.linalg.norm(vector - (vector @ unit) * unit))
+def _perpendicular(vector: np.ndarray, unit: np.ndarray) -> np.ndarray:
+    """``vector - (vector . unit) unit``."""
+    return vector - (vector @ unit) * unit
+
+
+def _wrench(record: dict, lam: np.ndarray) -> np.ndarray:
+    """The joint's wrench ``W lambda_J`` (6: force, couple)."""
+    return record["W"] @ np.array([lam[row] if row >= 0 else 0.0 for row in record["rows"]])
+
+
+def _load(record: dict, wrench: np.ndarray) -> float:
+    """The normal load N from the joint's wrench (module docstring of :mod:`kronlag.model.friction`)."""
+    return float(np.linalg.norm(_perpendicular(wrench[:3], record["u_force"])) + record["inverse_arm"]
+                 * np.linalg.norm(_perpendicular(wrench[3:], record["u_couple"])) + record["preload"])
+
+
+def _factor(record: dict, rate: float) -> float:
+    """``r mu(v)``: the factor of the normal load at the rate ``v``."""
+    coefficient = record["kinetic"]
+    if record["stribeck_velocity"] > 0:
+        coefficient += (record["static"] - record["kinetic"]) * math.exp(-(rate / record["stribeck_velocity"]) ** 2)
+    return record["radius"] * coefficient * math.tanh(rate / record["smoothing_velocity"])
 
 
 def friction_force(record: dict, lam: np.ndarray, rate: float) -> tuple[float, float]:
     """``(f, N)``: the friction force (torque) of one joint at multipliers ``lam`` and rate ``rate``, and
     its normal load (see :mod:`kronlag.model.friction`)."""
-    rows = record["rows"]
-    wrench = record["W"] @ np.array([lam[row] if row >= 0 else 0.0 for row in rows])
-    load = (_perpendicular(wrench[:3], record["u_force"]) + record["inverse_arm"]
-            * _perpendicular(wrench[3:], record["u_couple"]) + record["preload"])
-    coefficient = record["kinetic"]
-    if record["stribeck_velocity"] > 0:
-        coefficient += (record["static"] - record["kinetic"]) * math.exp(-(rate / record["stribeck_velocity"]) ** 2)
-    coefficient *= math.tanh(rate / record["smoothing_velocity"])
-    return record["radius"] * coefficient * load + record["viscous"] * rate, load
+    load = _load(record, _wrench(record, lam))
+    return _factor(record, rate) * load + record["viscous"] * rate, load
+
+
+def _load_slope(record: dict, wrench: np.ndarray) -> np.ndarray:
+    """``dN / d wrench`` (6): the unit directions of the force's and the couple's parts that count (zero
+    where a part vanishes), the couple's over the arm."""
+    slope = np.zeros(6)
+    for part, unit, weight in ((slice(0, 3), record["u_force"], 1.0), (slice(3, 6), record["u_couple"],
+                                                                         record["inverse_arm"])):
+        perpendicular = _perpendicular(wrench[part], unit)
+        norm = np.linalg.norm(perpendicular)
+        if norm > 0:
+            slope[part] = weight * perpendicular / norm
+    return slope
 
 
 def solve_with_friction(solve: Callable[[np.ndarray], tuple], flat: np.ndarray, h_offset: int,
                         records: np.ndarray, qd: np.ndarray) -> tuple:
     """Forward dynamics with friction: ``(qdd, lam, mu, rank)`` as ``solve(flat)`` returns them (the
     solve of the dynamics kernel's output ``flat`` without friction), with the friction forces of the
-    stacked ``records`` included (module docstring); rank -1 as ``solve`` gives it."""
+    stacked ``records`` included (module docstring: Newton steps on ``f - phi(lambda(f)) = 0`` from
+    ``f = 0``); rank -1 as ``solve`` gives it."""
     m = len(qd)
     base = solve(flat)
     if base[3] < 0:
         return base
     joints = [_split(record, m) for record in records.reshape(-1, record_size(m))]
-    rates = [float(joint["J"] @ qd) for joint in joints]
     responses = []
     for joint in joints:
         shifted = flat.copy()
@@ -87,19 +113,29 @@ def solve_with_friction(solve: Callable[[np.ndarray], tuple], flat: np.ndarray, 
         if solution[3] < 0:
             return solution
         responses.append([after - before for after, before in zip(solution[:3], base[:3])])
+    rates = [float(joint["J"] @ qd) for joint in joints]
+    factors = [_factor(joint, rate) for joint, rate in zip(joints, rates)]
+    wrenches = [_wrench(joint, base[1]) for joint in joints]
+    unit_wrenches = [[_wrench(joint, response[1]) for response in responses] for joint in joints]
     forces = np.zeros(len(joints))
     for _ in range(FRICTION_MAX_ITERATIONS):
-        lam = base[1] + sum(f * response[1] for f, response in zip(forces, responses))
-        new = np.array([friction_force(joint, lam, rate)[0] for joint, rate in zip(joints, rates)])
-        change, forces = np.max(np.abs(new - forces)), new
-        if change <= FRICTION_RTOL * np.max(np.abs(forces)):
+        residual, jacobian = np.zeros(len(joints)), np.eye(len(joints))
+        for j, joint in enumerate(joints):
+            wrench = wrenches[j] + sum(f * unit for f, unit in zip(forces, unit_wrenches[j]))
+            residual[j] = forces[j] - factors[j] * _load(joint, wrench) - joint["viscous"] * rates[j]
+            slope = _load_slope(joint, wrench)
+            jacobian[j] -= factors[j] * np.array([slope @ unit for unit in unit_wrenches[j]])
+        try:
+            step = np.linalg.solve(jacobian, residual)
+        except np.linalg.LinAlgError:
             break
-    else:
-        raise NumericalError(f"the friction forces did not converge in {FRICTION_MAX_ITERATIONS} steps "
-                             f"(last change {change:.3g}): friction coefficients too large for a unique solution")
-    qdd, lam, mu = (part + sum(f * response[k] for f, response in zip(forces, responses))
-                    for k, part in enumerate(base[:3]))
-    return qdd, lam, mu, base[3]
+        forces = forces - step
+        if np.max(np.abs(step)) <= FRICTION_RTOL * np.max(np.abs(forces)):
+            qdd, lam, mu = (part + sum(f * response[k] for f, response in zip(forces, responses))
+                            for k, part in enumerate(base[:3]))
+            return qdd, lam, mu, base[3]
+    raise NumericalError(f"the joints' friction forces did not converge in {FRICTION_MAX_ITERATIONS} Newton "
+                         "steps (a wedged joint: the friction grows with the load faster than the load allows)")
 
 
 def friction_columns(model, t, q, qd, lam) -> dict[str, np.ndarray]:

@@ -91,13 +91,14 @@ RESTING_GAP = 10.0
 #: Limits: a gap at most ``CONTACT_GAP * atol`` (in its own units) at the start is in contact there.
 CONTACT_GAP = 10.0
 #: Joint friction (:mod:`kronlag.numeric.friction`): the friction forces ``f`` solved together with
-#: ``(qdd, lambda)`` (they depend on the normal loads, hence on ``lambda``) are converged when one
-#: more fixed-point step changes none by more than ``FRICTION_RTOL`` times the largest: far below any
-#: integrator tolerance, so that the right-hand side is a function of the state to rounding (not lagged).
+#: ``(qdd, lambda)`` (they depend on the normal loads, hence on ``lambda``) are converged when a Newton
+#: step changes none by more than ``FRICTION_RTOL`` times the largest: far below any integrator
+#: tolerance, so that the right-hand side is a function of the state to rounding (not lagged).
 FRICTION_RTOL = 1e-13
-#: Most fixed-point steps of that solve; not converged by then (friction coefficients so large that the
-#: load grows faster than the friction it causes: no unique solution nearby), the evaluation fails.
-FRICTION_MAX_ITERATIONS = 200
+#: Most Newton steps of that solve (a few suffice: the loads are piecewise linear in ``f``); not converged
+#: by then (a wedged joint, whose friction grows with the load faster than the load allows: no solution
+#: nearby), the evaluation fails.
+FRICTION_MAX_ITERATIONS = 50
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float,

@@ -134,9 +134,34 @@ static double kronlag_friction_load(const double *record, const double *wrench)
     return kronlag_perpendicular(wrench, u_force) + c[5] * kronlag_perpendicular(wrench + 3, u_couple) + c[6];
 }
 
+/* Solve the n x n system A x = b in place (x in b) by Gaussian elimination with partial pivoting;
+ * 1 if A is singular. */
+static int kronlag_small_solve(double *A, double *b, int n)
+{
+    for (int c = 0; c < n; ++c) {
+        int pivot = c;
+        for (int i = c + 1; i < n; ++i) if (fabs(A[i * n + c]) > fabs(A[pivot * n + c])) pivot = i;
+        if (A[pivot * n + c] == 0.0) return 1;
+        if (pivot != c) {
+            for (int j = 0; j < n; ++j) { double x = A[c * n + j]; A[c * n + j] = A[pivot * n + j]; A[pivot * n + j] = x; }
+            double x = b[c]; b[c] = b[pivot]; b[pivot] = x;
+        }
+        for (int i = c + 1; i < n; ++i) {
+            double factor = A[i * n + c] / A[c * n + c];
+            for (int j = c; j < n; ++j) A[i * n + j] -= factor * A[c * n + j];
+            b[i] -= factor * b[c];
+        }
+    }
+    for (int i = n - 1; i >= 0; --i) {
+        for (int j = i + 1; j < n; ++j) b[i] -= A[i * n + j] * b[j];
+        b[i] /= A[i * n + i];
+    }
+    return 0;
+}
+
 /* The solve with the friction of the joints: the solution is linear in h, so the responses to a
  * unit friction force of each joint (the forcing -J_j, right-hand sides sharing the factorization)
- * give the solution for any friction forces f, and f = phi(lambda(f)) is found by fixed-point steps
+ * give the solution for any friction forces f, and f = phi(lambda(f)) is found by Newton steps
  * to KRONLAG_FRICTION_RTOL.  Returns 0, 1 (singular) or 2 (the friction forces did not converge). */
 static int kronlag_friction_solve(double t, const double *q, const double *qd, const double *p, const double *terms,
                                   double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
@@ -165,20 +190,42 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
         factor[j] = kronlag_friction_coefficient(record, rates[j]);
         viscous[j] = KRONLAG_FRICTION_FIELDS(record)[2] * rates[j];
     }
+    /* Newton steps on g(f) = f - r mu N(f) - c v = 0 (N(f) piecewise linear in f: its derivative is the
+     * unit direction of the force and couple parts times their responses), from f = 0 */
     int converged = 0;
     for (int step = 0; step < KRONLAG_FRICTION_MAX_ITERATIONS && !converged; ++step) {
-        double change = 0.0, largest = 0.0, updated[nf];
+        double jacobian[nf * nf], residual[nf];
         for (int j = 0; j < nf; ++j) {
-            double total[6];
+            const double *record = records + j * size, *u_force = record + m + 42, *u_couple = u_force + 3;
+            double total[6], direction[6];
             for (int a = 0; a < 6; ++a) {
                 total[a] = wrench[j][a];
                 for (int i = 0; i < nf; ++i) total[a] += forces[i] * response[j][i][a];
             }
-            updated[j] = factor[j] * kronlag_friction_load(records + j * size, total) + viscous[j];
-            change = fmax(change, fabs(updated[j] - forces[j]));
-            largest = fmax(largest, fabs(updated[j]));
+            residual[j] = forces[j] - factor[j] * kronlag_friction_load(record, total) - viscous[j];
+            /* d|p|/dw = p / |p| with p = w - (w.u) u (p is perpendicular to u), zero where p = 0 */
+            for (int part = 0; part < 2; ++part) {
+                const double *w = total + 3 * part, *u = part ? u_couple : u_force;
+                double along = w[0] * u[0] + w[1] * u[1] + w[2] * u[2];
+                double weight = part ? KRONLAG_FRICTION_FIELDS(record)[5] : 1.0, norm = 0.0;
+                double *d = direction + 3 * part;
+                for (int a = 0; a < 3; ++a) { d[a] = w[a] - along * u[a]; norm += d[a] * d[a]; }
+                norm = sqrt(norm);
+                for (int a = 0; a < 3; ++a) d[a] = norm > 0.0 ? weight * d[a] / norm : 0.0;
+            }
+            for (int i = 0; i < nf; ++i) {
+                double slope = 0.0;
+                for (int a = 0; a < 6; ++a) slope += direction[a] * response[j][i][a];
+                jacobian[j * nf + i] = (i == j) - factor[j] * slope;
+            }
         }
-        for (int j = 0; j < nf; ++j) forces[j] = updated[j];
+        if (kronlag_small_solve(jacobian, residual, nf)) return 2;
+        double change = 0.0, largest = 0.0;
+        for (int j = 0; j < nf; ++j) {
+            forces[j] -= residual[j];
+            change = fmax(change, fabs(residual[j]));
+            largest = fmax(largest, fabs(forces[j]));
+        }
         converged = change <= KRONLAG_FRICTION_RTOL * largest;
     }
     if (!converged) return 2;
