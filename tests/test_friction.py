@@ -355,3 +355,12 @@ def test_spatial_friction_is_the_force_or_torque_along_the_axis_against_the_rate
         plain.add_force(plain.joints[0].point, list(-f * u), name="friction")
     reference = kronlag.derive(plain).numeric({"m": 1.5, "g": G}, backend="python").forward_dynamics(q, qd)
     np.testing.assert_allclose(solution.qdd, reference.qdd, rtol=1e-9, atol=1e-9)
+
+
+def test_analyses_that_do_not_include_friction_refuse_it():
+    """Inverse dynamics and linearization would silently leave the friction out: they refuse."""
+    model = kronlag.derive(_incline(0.3, 0.2, 1e-3)).numeric({"m": 2.0, "g": G}, backend="python")
+    with pytest.raises(kronlag.InputError, match="inverse dynamics does not include joint friction"):
+        model.inverse_dynamics(np.zeros(3), np.zeros(3), np.zeros(3), actuated=["x_block"])
+    with pytest.raises(kronlag.InputError, match="linearize: .* has joint friction"):
+        kronlag.linearize(model, np.zeros(3))

@@ -46,7 +46,8 @@ if TYPE_CHECKING:
     from .joints import Joint
     from .system import System
 
-__all__ = ["Friction", "FRICTION_FIELDS", "check_friction", "FRICTION_KINDS", "FRICTION_LAWS", "RECORD_FIELDS", "record_size", "friction_record"]
+__all__ = ["Friction", "FRICTION_FIELDS", "check_friction", "friction_uses", "FRICTION_KINDS", "FRICTION_LAWS",
+           "RECORD_FIELDS", "record_size", "friction_record"]
 
 #: The joint kinds that take friction, by dimension.
 FRICTION_KINDS = {2: ("revolute", "prismatic"), 3: ("revolute", "prismatic")}

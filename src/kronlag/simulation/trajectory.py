@@ -305,7 +305,8 @@ class Trajectory(ColumnExport):
     @cached_property
     def nonconservative_work(self) -> np.ndarray:
         """``W(t) = integral qd^T (f_Q - Phi_q^T lambda - A^T mu) dt`` from ``t[0]``: the work of applied
-        forces and torques, dampers, generalized forces, joint friction and drives, shape (N,); see :mod:`kronlag.simulation.energy`."""
+        forces and torques, dampers, generalized forces, joint friction and drives, shape (N,); see
+        :mod:`kronlag.simulation.energy`."""
         return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd, inputs=self.inputs)
 
     @cached_property
