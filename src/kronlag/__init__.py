@@ -39,6 +39,7 @@ from .core.errors import (  # noqa: E402
 from .model.bodies import PlanarBody, PointMass, RigidBody, check_parameter_values  # noqa: E402
 from .model.frames import Frame  # noqa: E402
 from .model.free_bodies import FreeBody, free_body, mechanism  # noqa: E402
+from .model.friction import Friction  # noqa: E402
 from .model.joints import Joint  # noqa: E402
 from .model.loads import Damper, Spring  # noqa: E402
 from .model.modelfile import load_model  # noqa: E402
@@ -72,6 +73,7 @@ __all__ = [
     "joints",
     "models",
     "Frame",
+    "Friction",
     "Joint",
     "FreeBody",
     "free_body",

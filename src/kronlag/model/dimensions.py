@@ -6,9 +6,9 @@ base dimensions (mass, length, time, ...).  Where an expression is used fixes it
 - a body's mass is a mass, its position a length, its planar angle and the entries of its
   rotation dimensionless, its inertia (planar scalar, spatial tensor entries) a mass*length^2;
 - gravity is a length/time^2; a point of a spring, damper, force, drawing or trace a length;
-- a spring's stiffness an energy/length^2 and its free length a length, a damper's coefficient a
-  force/speed, a force a force, a torque and a potential an energy, the generalized force of a
-  coordinate ``q`` an energy/dim(q);
+- a spring's stiffness an energy/length^2 and its free length a length, a damper's coefficient a force/speed, a
+  force a force, a torque and a potential an energy, the generalized force of a coordinate ``q`` an energy/dim(q),
+  a joint's friction quantities as :func:`kronlag.model.friction.friction_uses` says;
 - the terms of every sum are alike (so each constraint row is homogeneous and a drive's motion
   has its target's dimension), the arguments of sin, cos, exp, log, ... and of a power with a
   symbolic exponent are dimensionless, ``t`` is a time and the speed of ``q`` is dim(q)/time.
@@ -38,6 +38,7 @@ import sympy as sp
 
 from ..core.errors import InputError, ModelError
 from .bodies import Body
+from .friction import friction_uses
 from .loads import BodyTorque, Damper, GeneralizedForce, PointForce, Spring
 from .symbols import speed_symbol, t
 
@@ -501,8 +502,9 @@ def _uses(system: System):
                     for k, value in enumerate(system.gravity))
     joint_rows = {}
     for j, joint in enumerate(system.joints):
-        for row in joint.constraint_names:
-            joint_rows[row] = Place(f"joints[{j}]", f"joint {joint.name!r} row {row!r}")
+        joint_rows |= {row: Place(f"joints[{j}]", f"joint {joint.name!r} row {row!r}") for row in joint.constraint_names}
+        yield from ((Place(f"joints[{j}].friction.{key}", f"joint {joint.name!r} friction {key}"), value,
+                     Dimension(powers)) for key, value, powers in friction_uses(joint))
     for key in ("constraints", "nonholonomic_constraints"):
         index = 0
         for constraint in getattr(system, key):

@@ -57,6 +57,7 @@ import sympy as sp
 from ..core.errors import ModelError
 from .bodies import Pose
 from .frames import GROUND, BodyPoint, Frame
+from .friction import Friction, check_friction
 from .rotations import skew
 
 if TYPE_CHECKING:
@@ -180,6 +181,8 @@ class Joint:
         The geometry it was added with (``at_a``, ``at_b`` as body coordinates, and
         whichever of ``axis``, ``axis_b``, ``angle``, ``rotation`` its kind uses), so
         that ``add_joint(kind, body_a, body_b, name=name, **dict(geometry))`` adds it again.
+    friction : Friction or None
+        Its friction (:mod:`kronlag.model.friction`), if any.
     """
 
     name: str
@@ -191,6 +194,7 @@ class Joint:
     rotation_b: sp.ImmutableMatrix
     wrench: sp.ImmutableMatrix
     geometry: tuple[tuple[str, object], ...] = ()
+    friction: Friction | None = None
 
     @property
     def dimension(self) -> int:
@@ -241,7 +245,8 @@ def _axis(value, dimension: int, what: str, *, numeric: bool) -> sp.Matrix:
 
 
 def add_joint(system: System, kind: str, body_a: str, body_b: str, *, at_a=None, at_b=None, axis=None,
-              axis_b=None, angle=0, rotation=None, name: str | None = None) -> Joint:
+              axis_b=None, angle=0, rotation=None, name: str | None = None,
+              friction: Friction | None = None) -> Joint:
     """Add a joint between ``body_a`` (``"ground"`` for the world) and ``body_b``.
 
     Parameters
@@ -267,6 +272,9 @@ def add_joint(system: System, kind: str, body_a: str, body_b: str, *, at_a=None,
         ``R_A^T R_B`` held by spatial prismatic and rigid joints (default I).
     name : str, optional
         Default ``"<body_a>_<body_b>_<kind>"``.
+    friction : Friction, optional
+        Friction from the joint's normal load (revolute and prismatic joints), see
+        :mod:`kronlag.model.friction`.
 
     Returns
     -------
@@ -287,6 +295,8 @@ def add_joint(system: System, kind: str, body_a: str, body_b: str, *, at_a=None,
     if any(joint.name == name for joint in system.joints):
         raise ModelError(f"duplicate joint name {name!r}")
     spec = kinds[kind]
+    if friction is not None:
+        check_friction(system, friction, kind, what)
     for body in (body_a, body_b):
         if body != GROUND and spec.turns and not system.body(body).oriented:
             raise ModelError(f"{what}: a {kind} joint holds the orientation of its bodies, but {body!r} is a "
@@ -337,6 +347,6 @@ def add_joint(system: System, kind: str, body_a: str, body_b: str, *, at_a=None,
                  for key in ("at_a", "at_b", *spec.needs, *spec.accepts) if key in ("at_a", "at_b")
                  or given[key] is not None)
     joint = Joint(name, kind, body_a, body_b, constraint_names, sp.ImmutableMatrix(joint_point),
-                  sp.ImmutableMatrix(pose_b.frame.rotation), sp.ImmutableMatrix(wrench), kept)
+                  sp.ImmutableMatrix(pose_b.frame.rotation), sp.ImmutableMatrix(wrench), kept, friction)
     system.joints.append(joint)
     return joint

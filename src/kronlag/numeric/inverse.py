@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..core.errors import ActuationWarning, InputError
+from .friction import friction_joints
 from .linalg import pseudo_inverses
 from .results import InverseDynamicsResult
 
@@ -36,6 +37,10 @@ def solve_inverse_dynamics(model: NumericModel, t, terms, q, qd, qdd, actuated, 
     """The stacked solution of :meth:`NumericModel.inverse_dynamics` at N states (``terms``: the
     blocks of the ``"dynamics"`` kernel, :func:`~kronlag.numeric.codegen.layouts.split_terms`, each with a
     leading N)."""
+    friction = friction_joints(model.equations.system)
+    if friction:  # rather than forces silently without it
+        names = ", ".join(joint.name for joint in friction)
+        raise InputError(f"inverse dynamics does not include joint friction (joints {names})")
     columns = model.coordinate_indices(list(actuated), "actuated coordinate(s)")
     rows = constraint_rows(model, constraints)
     check_motion(model, t, terms, q, qd, qdd, rows, constraint_tol)

@@ -158,7 +158,8 @@ class NumericModel(MatrixAccessors):
         or the single kernel of that name."""
         library = self._libraries.get(group)
         if library is None:
-            names = _LIBRARY_GROUPS.get(group, (group,))
+            friction = ("friction",) if group == "dynamics" and self._source.has_friction else ()
+            names = _LIBRARY_GROUPS.get(group, (group,)) + friction
             kernels = [self._source.kernel(name) for name in names]
             library = codegen.BACKENDS[self.backend](kernels, m=self.m, n_parameters=len(self.parameter_names),
                                                      rank_rtol=self.rank_rtol)
@@ -324,6 +325,8 @@ class NumericModel(MatrixAccessors):
         """
         parameters = self._parameters.vector(t) if self._constants is None else self._constants
         qdd, lam, mu, rank = self._forward(t, q, qd, parameters, alpha, beta)
+        if rank == -2:
+            raise NumericalError(f"the joints' friction forces did not converge at t = {t!r} (coefficients too large)")
         if rank < 0:
             if not (np.isfinite(q).all() and np.isfinite(qd).all()):  # no configuration to judge
                 raise NumericalError(f"{NOT_FINITE} at t = {t!r}: q = {np.asarray(q).tolist()}, "

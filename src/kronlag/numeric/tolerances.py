@@ -50,7 +50,7 @@ from ..core.errors import InputError
 
 __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
            "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "ZERO_EIGENVALUE_RTOL", "RESTING_GAP",
-           "CONTACT_GAP", "integrator_tolerances",
+           "CONTACT_GAP", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "integrator_tolerances",
            "zero_eigenvalue_threshold", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes",
            "singular_ratio", "c_macros"]
 
@@ -90,6 +90,15 @@ ZERO_EIGENVALUE_RTOL = 1e-9
 RESTING_GAP = 10.0
 #: Limits: a gap at most ``CONTACT_GAP * atol`` (in its own units) at the start is in contact there.
 CONTACT_GAP = 10.0
+#: Joint friction (:mod:`kronlag.numeric.friction`): the friction forces ``f`` solved together with
+#: ``(qdd, lambda)`` (they depend on the normal loads, hence on ``lambda``) are converged when a Newton
+#: step changes none by more than ``FRICTION_RTOL`` times the largest: far below any integrator
+#: tolerance, so that the right-hand side is a function of the state to rounding (not lagged).
+FRICTION_RTOL = 1e-13
+#: Most Newton steps of that solve (a few suffice: the loads are piecewise linear in ``f``); not converged
+#: by then (a wedged joint, whose friction grows with the load faster than the load allows: no solution
+#: nearby), the evaluation fails.
+FRICTION_MAX_ITERATIONS = 50
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float,
@@ -162,4 +171,5 @@ def c_macros(rank_rtol: float) -> str:
             f"#define KRONLAG_APPROACH_RTOL {APPROACH_RTOL!r}\n"
             f"#define KRONLAG_LEAVE_RTOL {LEAVE_RTOL!r}\n"
             f"#define KRONLAG_MAX_PROJECTION_ITERATIONS {MAX_PROJECTION_ITERATIONS}\n"
-            f"#define KRONLAG_STALL {STALL!r}\n")
+            f"#define KRONLAG_STALL {STALL!r}\n#define KRONLAG_FRICTION_RTOL {FRICTION_RTOL!r}\n"
+            f"#define KRONLAG_FRICTION_MAX_ITERATIONS {FRICTION_MAX_ITERATIONS}\n")

@@ -9,7 +9,7 @@ constraints, the power of the drives for rheonomic ones.  So::
     E(t) - E(0) = W(t),   W(t) = integral_0^t qd^T (f_Q - Phi_q^T lambda - A^T mu) dt
 
 where ``W`` is the work of the non-conservative forces (applied forces and
-torques, dampers, generalized forces) and of the drives.  ``E - E(0) - W`` is
+torques, dampers, generalized forces, joint friction) and of the drives.  ``E - E(0) - W`` is
 the true energy drift of an integration, for driven and damped models as well
 as conservative ones.
 """
@@ -18,7 +18,17 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["nonconservative_work"]
+from ..numeric.friction import friction_columns, friction_joints
+
+__all__ = ["nonconservative_work", "friction_work"]
+
+
+def _friction_power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:
+    """``Q_f . qd = -sum_j f_j v_j``, the power of the joints' friction (:mod:`kronlag.model.friction`)."""
+    if not friction_joints(model.equations.system):
+        return 0.0
+    lam = model.forward_dynamics(q, qd, t).lam
+    return float(friction_columns(model, t, q, qd, lam)["friction_power"][0])
 
 
 def _power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:
@@ -26,14 +36,15 @@ def _power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:
     if model.equations.constraints_do_work:
         result = model.forward_dynamics(q, qd, t)
         forces = forces - model.Phi_q(q, t).T @ result.lam - model.A(q, t).T @ result.mu
-    return float(qd @ forces)
+    return float(qd @ forces) + _friction_power(model, t, q, qd)
 
 
 def nonconservative_work(model, t, q, qd, qdd, *, inputs=None) -> np.ndarray:
     """``W(t_k) = integral_{t_0}^{t_k} P dt`` along a sampled motion, shape (N,).
 
     The power ``P = qd^T f_Q``, plus that of the constraint forces
-    ``-qd^T (Phi_q^T lambda + A^T mu)`` when they do work (drives, ``b != 0``), is integrated between samples by the cubic
+    ``-qd^T (Phi_q^T lambda + A^T mu)`` when they do work (drives, ``b != 0``) and that of joint
+    friction ``Q_f . qd`` (:func:`friction_work`), is integrated between samples by the cubic
     Hermite rule ``h/2 (P0 + P1) + h^2/12 (P0' - P1')`` (error O(h^5) per
     interval), with ``P' = dP/dt`` by a central difference along the motion
     ``(q + e qd, qd + e qdd, t + e)``.
@@ -54,11 +65,25 @@ def nonconservative_work(model, t, q, qd, qdd, *, inputs=None) -> np.ndarray:
     if inputs:
         power, rate = _controlled_power(model, t, q, qd, qdd, inputs)
         return _integrated(t, power, rate)
-    power = np.array([_power(model, *state) for state in zip(t, q, qd)])
+    return _work(_power, model, t, q, qd, qdd)
+
+
+def friction_work(model, t, q, qd, qdd) -> np.ndarray:
+    """The work of the joints' friction ``integral Q_f . qd dt`` from ``t[0]`` (<= 0 but for a preload
+    pushing a joint along), by the rule of :func:`nonconservative_work`, shape (N,); zeros without friction."""
+    t = np.asarray(t, dtype=float)
+    if len(t) == 0 or not friction_joints(model.equations.system):
+        return np.zeros(len(t))
+    return _work(_friction_power, model, t, q, qd, qdd)
+
+
+def _work(power_of, model, t: np.ndarray, q, qd, qdd) -> np.ndarray:
+    """``integral power_of(model, t, q, qd) dt`` over the samples (:func:`_integrated`)."""
+    power = np.array([power_of(model, *state) for state in zip(t, q, qd)])
     scale = np.max(np.diff(t)) if len(t) > 1 else 1.0
     step = 1e-6 * scale
-    rate = np.array([(_power(model, time + step, x + step * v, v + step * a)
-                      - _power(model, time - step, x - step * v, v - step * a)) / (2 * step)
+    rate = np.array([(power_of(model, time + step, x + step * v, v + step * a)
+                      - power_of(model, time - step, x - step * v, v - step * a)) / (2 * step)
                      for time, x, v, a in zip(t, q, qd, qdd)])
     return _integrated(t, power, rate)
 

@@ -21,8 +21,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..numeric.friction import friction_columns, friction_joints
 from ..numeric.reactions import Reaction, joint_reaction, reaction_columns
-from .energy import nonconservative_work
+from .energy import friction_work, nonconservative_work
 from .labelled import LabelledArrays, multiplier_columns
 
 if TYPE_CHECKING:
@@ -304,8 +305,15 @@ class Trajectory(ColumnExport):
     @cached_property
     def nonconservative_work(self) -> np.ndarray:
         """``W(t) = integral qd^T (f_Q - Phi_q^T lambda - A^T mu) dt`` from ``t[0]``: the work of applied
-        forces and torques, dampers, generalized forces and drives, shape (N,); see :mod:`kronlag.simulation.energy`."""
+        forces and torques, dampers, generalized forces, joint friction and drives, shape (N,); see
+        :mod:`kronlag.simulation.energy`."""
         return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd, inputs=self.inputs)
+
+    @cached_property
+    def friction_work(self) -> np.ndarray:
+        """``integral Q_f . qd dt`` from ``t[0]``: the work of the joints' friction (negative: energy lost),
+        shape (N,), part of :attr:`nonconservative_work`; zeros without friction (:mod:`kronlag.model.friction`)."""
+        return friction_work(self.model, self.t, self.q, self.qd, self.qdd)
 
     @property
     def energy_balance(self) -> np.ndarray:
@@ -345,6 +353,8 @@ class Trajectory(ColumnExport):
         if self.limit_forces is not None:  # limits: each side's contact force
             sides = [side.name for limit in self.model.equations.system.limits for side in limit.sides]
             columns.update({f"{side}.force": self.limit_forces[:, i] for i, side in enumerate(sides)})
+        if friction_joints(self.model.equations.system):  # joint friction: force, normal load and rate by joint
+            columns.update(friction_columns(self.model, self.t, self.q, self.qd, self.lam))
         return columns
 
     def reaction(self, name: str, *, frame: str = "world") -> Reaction:

@@ -39,6 +39,7 @@ import scipy.linalg
 import sympy as sp
 
 from ..core.errors import InputError
+from ..numeric.friction import friction_joints
 from ..numeric.linalg import pseudo_inverses
 from ..numeric.tolerances import RANK_RTOL, matrix_rank, numerical_rank, zero_eigenvalue_threshold
 from ..simulation.trajectory import Result, Trajectory
@@ -258,6 +259,9 @@ def linearize(model: NumericModel, q, qd=None, *, t: float = 0.0, independent: S
     -------
     LinearModel
     """
+    if friction_joints(model.equations.system):
+        raise InputError(f"linearize: {model.equations.system.name} has joint friction, which the linearization "
+                         "does not include")
     if model.equations.rheonomic:
         raise InputError(f"linearize: {model.equations.system.name} has time-dependent constraints (drives), so its "
                          "motion about a point is not that of a fixed linear system; linearize the model without "

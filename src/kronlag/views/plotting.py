@@ -23,6 +23,7 @@ import sympy as sp
 from sympy.printing.conventions import split_super_sub
 
 from ..core.errors import InputError
+from ..numeric.friction import friction_columns, friction_joints
 from ..numeric.reactions import GENERALIZED_FORCE_UNITS, REACTION_UNITS, multiplier_labels
 from ..simulation.trajectory import LimitEvent
 
@@ -152,9 +153,22 @@ def _energy_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> Non
 
 
 def _energy_drift_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
+    """``E(t) - E(t0)``; with joint friction ``E(t) - E(t0) - W_f(t)`` (its work is energy lost, not drift)."""
     total = traj.kinetic_energy + traj.potential_energy
-    _plot_series(axes, traj.t, (total - total[0])[:, None], ["$E(t) - E(t_0)$"],
+    drift, label = total - total[0], "$E(t) - E(t_0)$"
+    if friction_joints(traj.model.equations.system):
+        drift, label = drift - traj.friction_work, "$E(t) - E(t_0) - W_f(t)$"
+    _plot_series(axes, traj.t, drift[:, None], [label],
                  title="Total-energy drift", ylabel=_with_unit(r"$\Delta E$", units.get("energy")))
+
+
+def _friction_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
+    """Each joint's friction force or torque (against its rate)."""
+    joints = friction_joints(traj.model.equations.system)
+    columns = friction_columns(traj.model, traj.t, traj.q, traj.qd, traj.lam)
+    _plot_series(axes, traj.t, np.column_stack([columns[f"{joint.name}.friction"] for joint in joints]),
+                 [joint.name for joint in joints], title="joint friction (force or torque)",
+                 ylabel="friction (N or N*m)" if units.get("energy") == "J" else "friction")
 
 
 def _constraint_drift_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
@@ -246,6 +260,8 @@ def _panels(traj: Trajectory, reactions: bool | Sequence[str] | None
     panels += [_energy_panel, _energy_drift_panel]
     if traj.limit_forces is not None:
         panels.append(_limit_forces_panel)
+    if friction_joints(traj.model.equations.system):
+        panels.append(_friction_panel)
     joints = _selected_joints(traj, reactions)
     panels += [functools.partial(_reaction_force_panel, joint=joint) for joint in joints]
     couples = [joint for joint in joints if _transmits_couple(joint)]

@@ -17,6 +17,7 @@ import sympy as sp
 from ...core.errors import ExpressionError, ModelError, ModelFileError
 from ..bodies import BODY_TYPES, Body
 from ..expressions import RESERVED_NAMES, parse_expression
+from ..friction import FRICTION_FIELDS, Friction
 from ..robot_formats import ROBOT_READERS, load_robot
 from ..symbols import speed_symbol, t
 from ..system import System, drive_name
@@ -344,7 +345,8 @@ def _read_body_points(reader: _Reader, system: System, table, body: str, entry: 
 def _read_joints(reader: _Reader, system: System, document: dict) -> None:
     dimension = system.dimension
     for entry, table in reader.tables(document, "joints", required=("type", "body_a", "body_b"),
-                                      optional=("name", "at_a", "at_b", "axis", "axis_b", "angle", "rotation")):
+                                      optional=("name", "at_a", "at_b", "axis", "axis_b", "angle", "rotation",
+                                                "friction")):
         options: dict[str, Any] = {}
         for key in ("at_a", "at_b"):
             if key in table:
@@ -358,11 +360,26 @@ def _read_joints(reader: _Reader, system: System, document: dict) -> None:
             options["angle"] = reader.expression(table["angle"], f"{entry}.angle")
         if "rotation" in table:
             options["rotation"] = read_rotation(reader, table["rotation"], f"{entry}.rotation")
+        if "friction" in table:
+            options["friction"] = _read_friction(reader, table["friction"], f"{entry}.friction")
         with reader.entry(entry):
             system.add_joint(reader.string(table["type"], f"{entry}.type"),
                              reader.string(table["body_a"], f"{entry}.body_a"),
                              reader.string(table["body_b"], f"{entry}.body_b"),
                              name=reader.optional_name(table, entry), **options)
+
+
+def _read_friction(reader: _Reader, value, entry: str) -> Friction:
+    """A joint's ``friction = {kinetic = ..., ...}``: the fields of :class:`Friction`, expressions of the
+    parameters (``law`` a string)."""
+    quantities = [field for field in FRICTION_FIELDS if field not in ("kinetic", "law")]
+    table = reader.table(value, entry, required=("kinetic",), optional=(*quantities, "law"))
+    options: dict[str, Any] = {key: reader.expression(item, f"{entry}.{key}") for key, item in table.items()
+                               if key != "law"}
+    if "law" in table:
+        options["law"] = reader.string(table["law"], f"{entry}.law")
+    with reader.entry(entry):
+        return Friction(**options)
 
 
 def _read_settings(reader: _Reader, document: dict, model: ModelFile) -> None:

@@ -95,7 +95,10 @@ def _document(model: ModelFile) -> dict[str, Any]:
     document["joints"] = [{"name": joint.name, "type": joint.kind, "body_a": joint.body_a, "body_b": joint.body_b,
                            **{key: writer.expression(value) if key == "angle" else
                               writer.matrix(value) if key == "rotation" else writer.vector(value)
-                              for key, value in joint.geometry}} for joint in system.joints]
+                              for key, value in joint.geometry},
+                           **({"friction": {key: value if key == "law" else writer.expression(value)
+                                            for key, value in joint.friction.as_table().items()}}
+                              if joint.friction is not None else {})} for joint in system.joints]
     joint_rows = {row for joint in system.joints for row in joint.constraint_names}
     for key, items in (("constraints", [c for c in system.constraints if c.name not in joint_rows]),
                        ("nonholonomic_constraints", system.nonholonomic_constraints)):

@@ -14,6 +14,7 @@ import numpy as np
 import symengine as se
 
 from ...core.kernels import PLACEHOLDER, Kernel, literal
+from ...model.friction import record_size
 from ..tolerances import RANK_RTOL, c_macros
 from .build import load_shared_library
 from .layouts import dynamics_shape, layout_macros
@@ -29,6 +30,14 @@ C_DIRECTORY = Path(__file__).with_name("c")
 def c_file(name: str) -> str:
     """The text of ``numeric/codegen/c/<name>``."""
     return (C_DIRECTORY / name).read_text()
+
+
+def friction_header(kernel: Kernel | None, m: int) -> str:
+    """``KRONLAG_FRICTION`` (the joints with friction) and ``KRONLAG_FRICTION_RECORD`` (a record's length)
+    when the library has the ``"friction"`` kernel (:mod:`kronlag.numeric.friction`), else nothing."""
+    if kernel is None:
+        return ""
+    return f"#define KRONLAG_FRICTION {kernel.size // record_size(m)}\n#define KRONLAG_FRICTION_RECORD {record_size(m)}\n"
 
 
 def solver_header(m: int, r: int, s: int, rank_rtol: float) -> str:
@@ -147,7 +156,8 @@ class CLibrary:
         if solver:
             self.shape = dynamics_shape(self.kernels["dynamics"])
             m, r, s = self.shape
-            parts.append("#if KRONLAG_IN_PART(0)\n" + solver_header(m, r, s, rank_rtol))
+            parts.append("#if KRONLAG_IN_PART(0)\n" + solver_header(m, r, s, rank_rtol)
+                         + friction_header(self.kernels.get("friction"), m))
             parts.append(c_file("linalg.c") + c_file("augmented.c") + c_file("forward_dynamics_batch.c") + "#endif\n")
         self.source = "\n".join(parts)
         # part 0 (the solver) is small: one process per core for the kernel chunks besides it

@@ -12,7 +12,8 @@ from ...core.errors import InputError
 from ...core.kernels import ARRAY_NAMESPACE, SCALAR_NAMESPACE, Kernel, python_functions, python_source
 from ..linalg import solve_augmented
 from ..tolerances import RANK_RTOL
-from .layouts import dynamics_shape, split_terms
+from ..friction import solve_with_friction
+from .layouts import dynamics_shape, layout, split_terms
 
 __all__ = ["KernelLibrary", "PythonLibrary", "solve_dynamics_terms"]
 
@@ -111,8 +112,22 @@ class PythonLibrary:
     def _forward_dynamics(self, t: float, q, qd, p: np.ndarray, alpha: float, beta: float) -> tuple:
         qd = _vector(qd, self.m, "qd")
         kernel = self.kernels["dynamics"]
-        return solve_dynamics_terms(kernel, self._evaluate(self.scalar[kernel.name], (kernel.size,), t, q, qd, p),
-                                    qd, alpha, beta, rank_rtol=self.rank_rtol)
+        return self._solve(self._evaluate(self.scalar[kernel.name], (kernel.size,), t, q, qd, p), t, q, qd, p,
+                           alpha, beta)
+
+    def _solve(self, flat: np.ndarray, t: float, q, qd: np.ndarray, p: np.ndarray, alpha: float,
+               beta: float) -> tuple:
+        """Forward dynamics from the dynamics kernel's output, with the joints' friction if any."""
+        kernel = self.kernels["dynamics"]
+
+        def solve(terms: np.ndarray) -> tuple:
+            return solve_dynamics_terms(kernel, terms, qd, alpha, beta, rank_rtol=self.rank_rtol)
+
+        if "friction" not in self.kernels:
+            return solve(flat)
+        records = self._evaluate(self.scalar["friction"], (self.kernels["friction"].size,), t, q, qd, p)
+        h_offset = dict((name, offset) for name, offset, _ in layout("dynamics", *dynamics_shape(kernel)))["h"]
+        return solve_with_friction(solve, flat, h_offset, records, qd)
 
     def forward_dynamics_batch(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, p: np.ndarray,
                                alpha: float, beta: float) -> tuple[np.ndarray, np.ndarray]:
@@ -120,8 +135,10 @@ class PythonLibrary:
         terms = self.evaluate_batch(kernel.name, t, q, qd, p)
         out = np.full((len(q), sum(dynamics_shape(kernel))), np.nan)
         ranks = np.empty(len(q), dtype=np.int32)
+        times = np.broadcast_to(t, len(q))
         for i, (row, velocity) in enumerate(zip(terms, qd)):
-            qdd, lam, mu, ranks[i] = solve_dynamics_terms(kernel, row, velocity, alpha, beta, rank_rtol=self.rank_rtol)
+            parameters = p[i] if p.ndim == 2 else p
+            qdd, lam, mu, ranks[i] = self._solve(row, float(times[i]), q[i], velocity, parameters, alpha, beta)
             if ranks[i] >= 0:
                 out[i] = np.concatenate([qdd, lam, mu])
         return out, ranks

@@ -82,8 +82,17 @@ class KernelSource:
 
     # -- kernels -------------------------------------------------------------------
 
+    @property
+    def has_friction(self) -> bool:
+        """Some joint has friction: the ``"friction"`` kernel (its records) joins the dynamics library."""
+        return any(joint.friction is not None for joint in self.equations.system.joints)
+
     def kernel(self, name: str) -> Kernel:
         """The kernel ``name`` with common subexpressions eliminated (``symengine.cse``)."""
+        if name == "friction":
+            from ..friction import friction_kernel_matrices
+
+            return self.expression_kernel(name, friction_kernel_matrices(self.equations.system))
         names = LAYOUTS.get(name, (name,))
         blocks = tuple(Block(block, _rows_and_columns(block, self.equations.shape)) for block in names)
         return cse_kernel(name, blocks, [self.matrix(block) for block in names], self.convert.constants)

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...core.errors import SingularConfigurationError
+from ...numeric.friction import friction_joints
 from ...numeric.tolerances import INDEX3_TIGHTEST
 from ..drivers import Segment, require, run, segment_status, solution_of
 from ..problem import MultibodyProblem, Solution, Solver, SolverOptions
@@ -43,7 +44,8 @@ class Index3Solver(Solver):
     formulation = "index-3 augmented Lagrangian, mass-orthogonal projections (ALI3-P), compiled"
     integrator = "trapezoidal rule with local error control, compiled"
     order = 2
-    requirements = "the C backend, constant parameters, no nonholonomic constraints and a C compiler"
+    requirements = ("the C backend, constant parameters, no nonholonomic constraints, no joint friction (its "
+                    "index-3 iteration does not include it) and a C compiler")
     samples_inside = True
     #: The driver's ``rtol`` and ``atol`` are the requested ones divided by this, neither below
     #: :data:`~kronlag.numeric.tolerances.INDEX3_TIGHTEST`: the local error of a second-order
@@ -55,8 +57,8 @@ class Index3Solver(Solver):
 
     @staticmethod
     def supports(model: NumericModel) -> bool:
-        """C backend, constant parameters, no nonholonomic constraints, a C compiler."""
-        return CompiledSolver.supports(model) and model.s == 0
+        """C backend, constant parameters, no nonholonomic constraints, no joint friction, a C compiler."""
+        return CompiledSolver.supports(model) and model.s == 0 and not friction_joints(model.equations.system)
 
     def solve(self, problem: MultibodyProblem) -> Solution:
         require(self, problem.model)

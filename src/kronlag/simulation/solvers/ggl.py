@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ...core.errors import NumericalError
+from ...numeric.friction import friction_joints
 from ...numeric.linalg import least_norm
 from ...numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
+from ..drivers import require
 from ..problem import MultibodyProblem, Solution, Solver, SolverOptions
 from ..stepping import Stepper, march
+
+if TYPE_CHECKING:
+    from ...numeric.numeric_model import NumericModel
 
 __all__ = ["GGLSolver"]
 
@@ -133,6 +140,13 @@ class GGLSolver(Solver):
     integrator = "variable-order BDF, SUNDIALS IDA (scikit-sundae)"
     order = 5
     min_order = 1
+    requirements = "a model without joint friction (its residual does not include it)"
+
+    @staticmethod
+    def supports(model: NumericModel) -> bool:
+        """No joint friction."""
+        return not friction_joints(model.equations.system)
 
     def solve(self, problem: MultibodyProblem) -> Solution:
+        require(self, problem.model)
         return march(lambda: _IDAStepper(problem, self.options), problem, self.options)

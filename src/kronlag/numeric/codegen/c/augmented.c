@@ -7,9 +7,12 @@
  * start: off the constraint manifold (an integrator's state between projections) the rows of
  * redundant constraints are no longer exactly dependent, and counting them as independent would
  * solve a nearly singular system (accelerations of order drift / rounding).
+ * count right-hand sides share the factorization: the first [h; c], the others [forcing_e; 0] with
+ * forcing (count - 1 vectors of m) -- the response to a generalized force (joint friction); the
+ * solutions go to qdd (count x m) and nu (count x (K + 1)).
  * Returns 0, or 1 when M is not positive definite on the null space of G. */
-static int kronlag_solve(const double *terms, const double *qd, double alpha, double beta, int max_rank,
-                         double *qdd, double *nu, int *rank)
+static int kronlag_solve_many(const double *terms, const double *qd, double alpha, double beta, int max_rank,
+                              int count, const double *forcing, double *qdd, double *nu, int *rank)
 {
     enum { m = KRONLAG_M, r = KRONLAG_R, s = KRONLAG_S, k = KRONLAG_K };
     const double *M = terms + KRONLAG_DYNAMICS_M, *h = terms + KRONLAG_DYNAMICS_H, *Phi = terms + KRONLAG_DYNAMICS_PHI;
@@ -17,7 +20,7 @@ static int kronlag_solve(const double *terms, const double *qd, double alpha, do
     const double *gamma = terms + KRONLAG_DYNAMICS_GAMMA;
     const double *A = terms + KRONLAG_DYNAMICS_A, *b = terms + KRONLAG_DYNAMICS_B;
     const double *gamma_nh = terms + KRONLAG_DYNAMICS_GAMMA_NH;
-    double X[m * (k + 1)], tau[k + 1], c[k + 1], B[m * m], y[m];
+    double X[m * (k + 1)], tau[k + 1], c[k + 1], B[m * m];
     int perm[k + 1];
     /* X = G^T (m x k), c = [gamma - 2 alpha (Phi_q qd + Phi_t) - beta^2 Phi; gamma_nh - alpha (A qd + b)] */
     for (int j = 0; j < k; ++j) {
@@ -34,55 +37,220 @@ static int kronlag_solve(const double *terms, const double *qd, double alpha, do
     int rho = rank_of(magnitudes, steps);
     if (rho > max_rank) rho = max_rank;
     *rank = rho;
-    /* B = Q^T M Q, y = Q^T h with Q = H_0 ... H_{rho-1}; Z = Q[:, rho:] spans the null space of G. */
+    /* B = Q^T M Q with Q = H_0 ... H_{rho-1}; Z = Q[:, rho:] spans the null space of G. */
     memcpy(B, M, sizeof B);
-    memcpy(y, h, sizeof y);
-    for (int j = 0; j < rho; ++j) {
-        house_reflect_symmetric(X, m, k, j, tau[j], B);
-        house_apply(X, m, k, j, tau[j], y, 1);
-    }
-    /* R1^T = W T (second QR, K x rho), so that G = P R1^T Q1^T. Constraint part y1 = Q1^T qdd:
-     * T y1 = W^T P^T c (least squares when redundant rows are inconsistent). */
-    double W[(k + 1) * (k + 1)], wtau[k + 1], cp[k + 1];
-    for (int i = 0; i < k; ++i) {
-        cp[i] = c[perm[i]];
+    for (int j = 0; j < rho; ++j) house_reflect_symmetric(X, m, k, j, tau[j], B);
+    /* R1^T = W T (second QR, K x rho), so that G = P R1^T Q1^T. */
+    double W[(k + 1) * (k + 1)], wtau[k + 1];
+    for (int i = 0; i < k; ++i)
         for (int j = 0; j < rho; ++j) W[i * k + j] = i >= j ? X[j * k + i] : 0.0;
-    }
     house_qr(W, k, rho, k, NULL, wtau);
-    for (int j = 0; j < rho; ++j) house_apply(W, k, k, j, wtau[j], cp, 1);
-    double qt[m];
-    for (int i = rho - 1; i >= 0; --i) {
-        double sum = cp[i];
-        for (int j = i + 1; j < rho; ++j) sum -= W[i * k + j] * qt[j];
-        qt[i] = sum / W[i * k + i];
-    }
-    /* Null-space part y2: (Z^T M Z) y2 = Z^T h - Z^T M Q1 y1, Cholesky (fails if singular). */
+    /* Z^T M Z = B22 by Cholesky, in place (fails if singular); B21 and the rows 0..rho-1 are kept. */
     int n = m - rho;
-    double *B22 = B + rho * m + rho, *z = qt + rho;
-    for (int i = 0; i < n; ++i) {
-        double sum = y[rho + i];
-        for (int j = 0; j < rho; ++j) sum -= B[(rho + i) * m + j] * qt[j];
-        z[i] = sum;
-    }
-    /* the multipliers below need the rows 0..rho-1 of B only: B22 may be factorized in place */
+    double *B22 = B + rho * m + rho;
     if (cholesky_upper(B22, n, m)) return 1;
-    cholesky_solve(B22, n, m, z);
-    /* Multipliers, minimum norm: R1 P^T nu = Q1^T (h - M qdd) = y1 - B[:rho, :] qt,
-     * R1 = T^T W^T, so P^T nu = W T^{-T} (Q1^T (h - M qdd)). */
-    double a[k + 1];
-    for (int i = 0; i < rho; ++i) {
-        double sum = y[i];
-        for (int j = 0; j < m; ++j) sum -= B[i * m + j] * qt[j];
-        for (int j = 0; j < i; ++j) sum -= W[j * k + i] * a[j];
-        a[i] = sum / W[i * k + i];
+    for (int e = 0; e < count; ++e) {
+        double y[m], cp[k + 1], qt[m + 1], a[k + 1];
+        /* y = Q^T h; constraint part y1 = Q1^T qdd: T y1 = W^T P^T c (least squares when redundant
+         * rows are inconsistent). */
+        memcpy(y, e == 0 ? h : forcing + (e - 1) * m, sizeof y);
+        for (int j = 0; j < rho; ++j) house_apply(X, m, k, j, tau[j], y, 1);
+        if (e == 0) {
+            for (int i = 0; i < k; ++i) cp[i] = c[perm[i]];
+            for (int j = 0; j < rho; ++j) house_apply(W, k, k, j, wtau[j], cp, 1);
+            for (int i = rho - 1; i >= 0; --i) {
+                double sum = cp[i];
+                for (int j = i + 1; j < rho; ++j) sum -= W[i * k + j] * qt[j];
+                qt[i] = sum / W[i * k + i];
+            }
+        } else {
+            for (int i = 0; i < rho; ++i) qt[i] = 0.0; /* c = 0: no constraint part */
+        }
+        /* Null-space part y2: (Z^T M Z) y2 = Z^T h - Z^T M Q1 y1. */
+        double *z = qt + rho;
+        for (int i = 0; i < n; ++i) {
+            double sum = y[rho + i];
+            for (int j = 0; j < rho; ++j) sum -= B[(rho + i) * m + j] * qt[j];
+            z[i] = sum;
+        }
+        cholesky_solve(B22, n, m, z);
+        /* Multipliers, minimum norm: R1 P^T nu = Q1^T (h - M qdd) = y1 - B[:rho, :] qt,
+         * R1 = T^T W^T, so P^T nu = W T^{-T} (Q1^T (h - M qdd)). */
+        for (int i = 0; i < rho; ++i) {
+            double sum = y[i];
+            for (int j = 0; j < m; ++j) sum -= B[i * m + j] * qt[j];
+            for (int j = 0; j < i; ++j) sum -= W[j * k + i] * a[j];
+            a[i] = sum / W[i * k + i];
+        }
+        for (int i = rho; i < k; ++i) a[i] = 0.0;
+        for (int j = rho - 1; j >= 0; --j) house_apply(W, k, k, j, wtau[j], a, 1);
+        for (int i = 0; i < k; ++i) nu[e * (k + 1) + perm[i]] = a[i];
+        /* qdd = Q qt */
+        for (int j = rho - 1; j >= 0; --j) house_apply(X, m, k, j, tau[j], qt, 1);
+        memcpy(qdd + e * m, qt, m * sizeof *qt);
     }
-    for (int i = rho; i < k; ++i) a[i] = 0.0;
-    for (int j = rho - 1; j >= 0; --j) house_apply(W, k, k, j, wtau[j], a, 1);
-    for (int i = 0; i < k; ++i) nu[perm[i]] = a[i];
-    /* qdd = Q qt */
-    for (int j = rho - 1; j >= 0; --j) house_apply(X, m, k, j, tau[j], qt, 1);
-    memcpy(qdd, qt, sizeof qt);
     return 0;
+}
+
+#ifdef KRONLAG_FRICTION
+/* Joint friction: kronlag.numeric.friction is the reference of this code (the same records, from the
+ * kernel kronlag_friction, and the same steps). |v - (v.u) u| for 3-vectors. */
+static double kronlag_perpendicular(const double *v, const double *u)
+{
+    double along = v[0] * u[0] + v[1] * u[1] + v[2] * u[2], sum = 0.0;
+    for (int i = 0; i < 3; ++i) { double x = v[i] - along * u[i]; sum += x * x; }
+    return sqrt(sum);
+}
+
+/* One joint's wrench W lambda_J (6: force, couple) at the multipliers lam. */
+static void kronlag_friction_wrench(const double *record, const double *lam, double *wrench)
+{
+    const double *W = record + KRONLAG_M, *rows = W + 36;
+    double own[6];
+    for (int j = 0; j < 6; ++j) own[j] = rows[j] >= 0.0 ? lam[(int)rows[j]] : 0.0;
+    for (int i = 0; i < 6; ++i) {
+        wrench[i] = 0.0;
+        for (int j = 0; j < 6; ++j) wrench[i] += W[i * 6 + j] * own[j];
+    }
+}
+
+/* The fields after J_rate (m), W (36) and the rows (6): u_force (3), u_couple (3), then RECORD_FIELDS:
+ * static, kinetic, viscous, stribeck_velocity, radius, 1/arm, preload, smoothing_velocity. */
+#define KRONLAG_FRICTION_FIELDS(record) ((record) + KRONLAG_M + 48)
+
+/* r mu(v): the factor of the normal load in one joint's friction force at the rate v. */
+static double kronlag_friction_coefficient(const double *record, double rate)
+{
+    const double *c = KRONLAG_FRICTION_FIELDS(record);
+    double mu = c[1];
+    if (c[3] > 0.0) { double x = rate / c[3]; mu += (c[0] - c[1]) * exp(-x * x); }
+    return c[4] * mu * tanh(rate / c[7]);
+}
+
+/* The normal load N from the joint's wrench (friction_force in kronlag.numeric.friction). */
+static double kronlag_friction_load(const double *record, const double *wrench)
+{
+    const double *u_force = record + KRONLAG_M + 42, *u_couple = u_force + 3, *c = KRONLAG_FRICTION_FIELDS(record);
+    return kronlag_perpendicular(wrench, u_force) + c[5] * kronlag_perpendicular(wrench + 3, u_couple) + c[6];
+}
+
+/* Solve the n x n system A x = b in place (x in b) by Gaussian elimination with partial pivoting;
+ * 1 if A is singular. */
+static int kronlag_small_solve(double *A, double *b, int n)
+{
+    for (int c = 0; c < n; ++c) {
+        int pivot = c;
+        for (int i = c + 1; i < n; ++i) if (fabs(A[i * n + c]) > fabs(A[pivot * n + c])) pivot = i;
+        if (A[pivot * n + c] == 0.0) return 1;
+        if (pivot != c) {
+            for (int j = 0; j < n; ++j) { double x = A[c * n + j]; A[c * n + j] = A[pivot * n + j]; A[pivot * n + j] = x; }
+            double x = b[c]; b[c] = b[pivot]; b[pivot] = x;
+        }
+        for (int i = c + 1; i < n; ++i) {
+            double factor = A[i * n + c] / A[c * n + c];
+            for (int j = c; j < n; ++j) A[i * n + j] -= factor * A[c * n + j];
+            b[i] -= factor * b[c];
+        }
+    }
+    for (int i = n - 1; i >= 0; --i) {
+        for (int j = i + 1; j < n; ++j) b[i] -= A[i * n + j] * b[j];
+        b[i] /= A[i * n + i];
+    }
+    return 0;
+}
+
+/* The solve with the friction of the joints: the solution is linear in h, so the responses to a
+ * unit friction force of each joint (the forcing -J_j, right-hand sides sharing the factorization)
+ * give the solution for any friction forces f, and f = phi(lambda(f)) is found by Newton steps
+ * to KRONLAG_FRICTION_RTOL.  Returns 0, 1 (singular) or 2 (the friction forces did not converge). */
+static int kronlag_friction_solve(double t, const double *q, const double *qd, const double *p, const double *terms,
+                                  double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
+{
+    enum { m = KRONLAG_M, k = KRONLAG_K, nf = KRONLAG_FRICTION, size = KRONLAG_FRICTION_RECORD };
+    double records[nf * size + 1], forcing[nf * m], accelerations[(nf + 1) * m], multipliers[(nf + 1) * (k + 1)];
+    double rates[nf], forces[nf];
+    kronlag_friction(t, q, qd, p, records);
+    for (int j = 0; j < nf; ++j) {
+        const double *J = records + j * size;
+        rates[j] = 0.0;
+        forces[j] = 0.0;
+        for (int i = 0; i < m; ++i) { forcing[j * m + i] = -J[i]; rates[j] += J[i] * qd[i]; }
+    }
+    int status = kronlag_solve_many(terms, qd, alpha, beta, max_rank, nf + 1, forcing, accelerations, multipliers,
+                                    rank);
+    if (status) return status;
+    const double *dqdd = accelerations + m, *dnu = multipliers + (k + 1);
+    /* per joint j: its wrench without friction and per unit friction force of joint i (linear in f),
+     * the factor r mu(v_j) and the viscous force: each step is then a few flops a joint */
+    double wrench[nf][6], response[nf][nf][6], factor[nf], viscous[nf];
+    for (int j = 0; j < nf; ++j) {
+        const double *record = records + j * size;
+        kronlag_friction_wrench(record, multipliers, wrench[j]);
+        for (int i = 0; i < nf; ++i) kronlag_friction_wrench(record, dnu + i * (k + 1), response[j][i]);
+        factor[j] = kronlag_friction_coefficient(record, rates[j]);
+        viscous[j] = KRONLAG_FRICTION_FIELDS(record)[2] * rates[j];
+    }
+    /* Newton steps on g(f) = f - r mu N(f) - c v = 0 (N(f) piecewise linear in f: its derivative is the
+     * unit direction of the force and couple parts times their responses), from f = 0 */
+    int converged = 0;
+    for (int step = 0; step < KRONLAG_FRICTION_MAX_ITERATIONS && !converged; ++step) {
+        double jacobian[nf * nf], residual[nf];
+        for (int j = 0; j < nf; ++j) {
+            const double *record = records + j * size, *u_force = record + m + 42, *u_couple = u_force + 3;
+            double total[6], direction[6];
+            for (int a = 0; a < 6; ++a) {
+                total[a] = wrench[j][a];
+                for (int i = 0; i < nf; ++i) total[a] += forces[i] * response[j][i][a];
+            }
+            residual[j] = forces[j] - factor[j] * kronlag_friction_load(record, total) - viscous[j];
+            /* d|p|/dw = p / |p| with p = w - (w.u) u (p is perpendicular to u), zero where p = 0 */
+            for (int part = 0; part < 2; ++part) {
+                const double *w = total + 3 * part, *u = part ? u_couple : u_force;
+                double along = w[0] * u[0] + w[1] * u[1] + w[2] * u[2];
+                double weight = part ? KRONLAG_FRICTION_FIELDS(record)[5] : 1.0, norm = 0.0;
+                double *d = direction + 3 * part;
+                for (int a = 0; a < 3; ++a) { d[a] = w[a] - along * u[a]; norm += d[a] * d[a]; }
+                norm = sqrt(norm);
+                for (int a = 0; a < 3; ++a) d[a] = norm > 0.0 ? weight * d[a] / norm : 0.0;
+            }
+            for (int i = 0; i < nf; ++i) {
+                double slope = 0.0;
+                for (int a = 0; a < 6; ++a) slope += direction[a] * response[j][i][a];
+                jacobian[j * nf + i] = (i == j) - factor[j] * slope;
+            }
+        }
+        if (kronlag_small_solve(jacobian, residual, nf)) return 2;
+        double change = 0.0, largest = 0.0;
+        for (int j = 0; j < nf; ++j) {
+            forces[j] -= residual[j];
+            change = fmax(change, fabs(residual[j]));
+            largest = fmax(largest, fabs(forces[j]));
+        }
+        converged = change <= KRONLAG_FRICTION_RTOL * largest;
+    }
+    if (!converged) return 2;
+    for (int i = 0; i < m; ++i) {
+        qdd[i] = accelerations[i];
+        for (int j = 0; j < nf; ++j) qdd[i] += forces[j] * dqdd[j * m + i];
+    }
+    for (int i = 0; i < k; ++i) {
+        nu[i] = multipliers[i];
+        for (int j = 0; j < nf; ++j) nu[i] += forces[j] * dnu[j * (k + 1) + i];
+    }
+    return 0;
+}
+#endif
+
+/* The solve at a state: with the joints' friction when the model has any. */
+static int kronlag_solve_at(double t, const double *q, const double *qd, const double *p, const double *terms,
+                            double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
+{
+#ifdef KRONLAG_FRICTION
+    return kronlag_friction_solve(t, q, qd, p, terms, alpha, beta, max_rank, qdd, nu, rank);
+#else
+    (void)t; (void)q; (void)p;
+    return kronlag_solve_many(terms, qd, alpha, beta, max_rank, 1, NULL, qdd, nu, rank);
+#endif
 }
 
 /* Forward dynamics with multipliers (Baumgarte alpha, beta), at most max_rank independent rows of
@@ -93,7 +261,7 @@ int kronlag_forward_dynamics_ranked(double t, const double *q, const double *qd,
     double terms[KRONLAG_DYNAMICS_SIZE + 1], nu[KRONLAG_K + 1];
     int rank;
     kronlag_dynamics(t, q, qd, p, terms);
-    int status = kronlag_solve(terms, qd, alpha, beta, max_rank, qdd, nu, &rank);
+    int status = kronlag_solve_at(t, q, qd, p, terms, alpha, beta, max_rank, qdd, nu, &rank);
     for (int j = 0; j < KRONLAG_R; ++j) lam[j] = nu[j];
     for (int j = 0; j < KRONLAG_S; ++j) mu[j] = nu[KRONLAG_R + j];
     return status;
@@ -107,12 +275,15 @@ int kronlag_forward_dynamics(double t, const double *q, const double *qd, const 
 }
 
 /* Entry point for Python: in = [t, alpha, beta, q (m), qd (m), p (P)], out = [qdd (m), lambda (r), mu (s)];
- * returns the rank of [Phi_q; A], or -1 when the configuration is singular. */
+ * returns the rank of [Phi_q; A], -1 when the configuration is singular, -2 when the joints' friction
+ * forces did not converge. */
 int kronlag_forward_dynamics_packed(const double *in, double *out)
 {
     double terms[KRONLAG_DYNAMICS_SIZE + 1];
     int rank;
     const double *q = in + 3, *qd = q + KRONLAG_M;
     kronlag_dynamics(in[0], q, qd, qd + KRONLAG_M, terms);
-    return kronlag_solve(terms, qd, in[1], in[2], KRONLAG_K, out, out + KRONLAG_M, &rank) ? -1 : rank;
+    int status = kronlag_solve_at(in[0], q, qd, qd + KRONLAG_M, terms, in[1], in[2], KRONLAG_K, out, out + KRONLAG_M,
+                                  &rank);
+    return status ? -status : rank;
 }
