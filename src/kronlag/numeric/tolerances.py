@@ -90,6 +90,10 @@ ZERO_EIGENVALUE_RTOL = 1e-9
 RESTING_GAP = 10.0
 #: Limits: a gap at most ``CONTACT_GAP * atol`` (in its own units) at the start is in contact there.
 CONTACT_GAP = 10.0
+#: Limits under a sampled controller: a sample instant at most ``SAME_INSTANT * max(1, |t|)`` after an
+#: event is taken at the event, with the state before it (as when the event falls on the sample
+#: instant; an event located to rounding may fall just before it, and a shorter segment is rounding).
+SAME_INSTANT = 1e-10
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float,

@@ -135,7 +135,7 @@ def driver_source(model: NumericModel, kind: str) -> str:
 def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
     """The shared library of ``model`` with the driver ``kind`` of :data:`DRIVERS` (:func:`driver_source`)."""
     if isinstance(model, ControlledModel):  # a run's view of a model: the model's own libraries
-        model = model.loop.model
+        model = model.uncontrolled
     libraries = _LOADED.setdefault(model, {})
     if kind not in libraries:
         spec = DRIVERS[kind]
