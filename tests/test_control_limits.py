@@ -130,6 +130,25 @@ def test_a_sample_exactly_at_an_impact_sees_the_state_before_it(method):
     np.testing.assert_allclose(trajectory.inputs["u"][(tau < 0) | coasting & (tau < 0.125)], 0.0)
 
 
+@pytest.mark.parametrize("method", LIMIT_METHODS)
+@pytest.mark.parametrize("sampled", [False, True])
+def test_an_exception_of_the_controller_after_an_impact_propagates_with_the_run_so_far(method, sampled):
+    class Stop(Exception):
+        pass
+
+    def failing(t, q, qd):
+        if t > 1.5:
+            raise Stop("from the controller")
+        return spring_feedback(t, q, qd)
+
+    controller = kronlag.Sampled(failing, period=0.01) if sampled else failing
+    with pytest.raises(Stop) as raised:
+        kronlag.simulate(cart(), (0, 6), [0.5], [0.0], method=method, controller=controller)
+    trajectory = raised.value.trajectory
+    assert trajectory.result is kronlag.Result.RAISED and 1.0 < trajectory.t[-1] <= 1.51
+    assert len(_events(trajectory, "impact")) == 1 and trajectory.inputs["u"].shape == trajectory.t.shape
+
+
 # -- a pendulum driven by a sampled PID torque into a stop ----------------------------------------
 
 PENDULUM_FILE = """
