@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import functools
 import math
-import re
 
 import numpy as np
 import pytest
@@ -221,7 +220,7 @@ def pid_pendulum_reference(t_end: float, m: float = 2.0, L: float = 0.8, e: floa
         integral += period * error
         torque = PID["kp"] * error + PID["ki"] * integral - PID["kd"] * state[1]
 
-        def rhs(t, y):
+        def rhs(t, y, torque=torque):
             return [y[1], (-m * G * L / 2 * math.cos(y[0]) + torque) / inertia]
 
         def stop(t, y):
