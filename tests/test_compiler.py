@@ -149,3 +149,22 @@ def test_a_compiler_found_later_on_the_list_is_used_quietly(tmp_path, monkeypatc
         warnings.simplefilter("error")
         compiler = codegen.c_compiler()
     assert compiler.name == "cc" and compiler.command == (str(tmp_path / "cc"), *system.command[1:])
+
+
+def test_the_linked_libraries_are_part_of_the_library_key_and_its_run_path(tmp_path, monkeypatch):
+    """A library linked with shared libraries (the compiled drivers with SUNDIALS) is keyed by their paths,
+    and loads them itself (run paths), with nothing loaded with global symbols first."""
+    if codegen.c_compiler() is None:
+        pytest.skip("no C compiler")
+    from kronlag.simulation.drivers import sundials_libraries
+
+    monkeypatch.setenv("KRONLAG_CACHE", str(tmp_path))
+    source = "int SUNDIALSGetVersionNumber(int *, int *, int *, char *, int);\n" \
+             "int kronlag_major(void) { int a = 0, b = 0, c = 0; char label[64];\n" \
+             "    SUNDIALSGetVersionNumber(&a, &b, &c, label, 64); return a; }\n"
+    libraries = tuple(sundials_libraries())
+    linked = codegen.compile_shared_library(source, libraries=libraries)
+    assert linked != codegen.compile_shared_library(source, libraries=libraries[:1])
+    check = ("import ctypes, sys\nlibrary = ctypes.CDLL(sys.argv[1])\nprint(library.kronlag_major())\n")
+    done = subprocess.run([sys.executable, "-c", check, str(linked)], capture_output=True, text=True, check=False)
+    assert done.returncode == 0 and done.stdout.strip() == "7", done.stderr[-2000:]

@@ -325,3 +325,34 @@ def test_no_compiler_is_one_clear_error(slider_crank_model, tmp_path, monkeypatc
     monkeypatch.setattr(fmu_export.build.codegen, "c_compiler", lambda: None)
     with pytest.raises(kronlag.CompilerError, match="FMU export needs a C compiler"):
         kronlag.export_fmu(model, tmp_path / "x.fmu", q0=q0, qd0=qd0)
+
+
+#: The child process: ``kronlag.simulate`` with the compiled methods (CVODE, ALI3-P), then FMPy's model
+#: exchange (its own CVode) on the FMU in the same process; prints both final states as JSON.
+_SAME_PROCESS = """
+import json, sys
+import kronlag
+from kronlag.app.workflows import initial_state, numeric_model
+from kronlag.model.builtin import resolve_model
+from fmpy import simulate_fmu
+model_file = resolve_model("four_bar")
+model = numeric_model(model_file)
+q0, qd0 = initial_state(model_file, model)
+runs = [kronlag.simulate(model, (0.0, %r), q0, qd0, method=method, rtol=1e-10, atol=1e-12)
+        for method in ("compiled", "switching", "ali3p")]
+assert all(run.success for run in runs)
+names = list(model.coordinate_names)
+result = simulate_fmu(sys.argv[1], fmi_type="ModelExchange", stop_time=%r, output_interval=%r,
+                      relative_tolerance=1e-10, output=names)
+print(json.dumps({"kronlag": runs[0].q[-1].tolist(), "fmpy": [float(result[name][-1]) for name in names]}))
+""" % (T_END, T_END, DT)
+
+
+def test_fmpy_model_exchange_after_kronlag_simulate_in_the_same_process(exported):
+    """The compiled drivers are linked with scikit-sundae's SUNDIALS (run paths), not loaded with global
+    symbols: FMPy's own CVode loaded afterwards in the same process does not bind to them (it crashed)."""
+    done = subprocess.run([sys.executable, "-c", _SAME_PROCESS, str(exported["four_bar"][3])], capture_output=True,
+                          text=True, check=False)
+    assert done.returncode == 0, f"exit status {done.returncode}: {done.stderr[-3000:]}"
+    final = json.loads(done.stdout)
+    np.testing.assert_allclose(final["fmpy"], final["kronlag"], atol=1e-5)

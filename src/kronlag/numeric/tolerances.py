@@ -50,7 +50,7 @@ from ..core.errors import InputError
 
 __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
            "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "ZERO_EIGENVALUE_RTOL", "RESTING_GAP",
-           "CONTACT_GAP", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "integrator_tolerances",
+           "CONTACT_GAP", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "SAME_INSTANT", "integrator_tolerances",
            "zero_eigenvalue_threshold", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes",
            "singular_ratio", "c_macros"]
 
@@ -99,6 +99,10 @@ FRICTION_RTOL = 1e-13
 #: by then (a wedged joint, whose friction grows with the load faster than the load allows: no solution
 #: nearby), the evaluation fails.
 FRICTION_MAX_ITERATIONS = 50
+#: Limits under a sampled controller: a sample instant at most ``SAME_INSTANT * max(1, |t|)`` after an
+#: event is taken at the event, with the state before it (as when the event falls on the sample
+#: instant; an event located to rounding may fall just before it, and a shorter segment is rounding).
+SAME_INSTANT = 1e-10
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float,

@@ -306,13 +306,19 @@ class ControlledModel(NumericModel):
     first call the controller there.  Shares the compiled code of the model."""
 
     loop: ControlLoop
+    #: The model viewed (the run's model, or under limits a contact variant of it): its libraries.
+    uncontrolled: NumericModel
 
     @classmethod
     def of(cls, model: NumericModel, loop: ControlLoop) -> ControlledModel:
+        if tuple(model.parameter_names) != tuple(loop.model.parameter_names):
+            raise InputError("the controller's parameter vector does not fit this model: its parameters are "
+                             f"{', '.join(model.parameter_names)}, not {', '.join(loop.model.parameter_names)}")
         variant = object.__new__(cls)  # as NumericModel.with_parameters: the code is shared
         variant.__dict__.update(model.__dict__)
         variant._constants = loop.p
         variant.loop = loop
+        variant.uncontrolled = model
         return variant
 
     def parameter_vector(self, t: float = 0.0) -> np.ndarray:
@@ -339,7 +345,8 @@ def solve_sampled(solver: Solver, problem: MultibodyProblem, loop: ControlLoop) 
     itself (the Python methods; :attr:`Solver.samples_inside` False): the method runs from one sample
     instant to the next, the controller is called there, and the method starts again from that state.
 
-    Outputs at a sample instant are those of the interval it starts (with the new inputs)."""
+    Outputs at a sample instant are those of the interval it starts (with the new inputs).  Under
+    limits (``problem.watch``) a piece that ends at an event ends the solution there (its ``stop``)."""
     options, every_step = solver.options, problem.t_eval is None
     pieces: list[Solution] = []
     parameters: list[np.ndarray] = []
@@ -374,7 +381,7 @@ def solve_sampled(solver: Solver, problem: MultibodyProblem, loop: ControlLoop) 
     return Solution(t=np.concatenate([piece.t for piece in pieces]), y=np.concatenate([piece.y for piece in pieces]),
                     result=last.result, message=last.message, nfev=sum(piece.nfev for piece in pieces),
                     njev=sum(piece.njev for piece in pieces), steps=sum(piece.steps for piece in pieces),
-                    events=tuple(event for piece in pieces for event in piece.events),
+                    events=tuple(event for piece in pieces for event in piece.events), stop=last.stop,
                     parameters=np.concatenate(parameters))
 
 

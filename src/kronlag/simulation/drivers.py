@@ -64,24 +64,19 @@ def sundials_libraries() -> list[Path]:
     return found
 
 
-def _load_sundials() -> None:
-    """Load :func:`sundials_libraries` with global symbols, so that the driver library resolves its
-    SUNDIALS calls against them."""
-    for path in sundials_libraries():
-        ctypes.CDLL(str(path), mode=ctypes.RTLD_GLOBAL)
-
-
 def _c_file(name: str) -> str:
     """The text of ``simulation/c/<name>``, the C of the compiled integrators."""
     return (Path(__file__).with_name("c") / name).read_text()
 
 
 @lru_cache(maxsize=None)
-def _driver_library(source: str) -> ctypes.CDLL:
-    """``source`` (a model's C source with kernels and a driver appended) compiled once (cached on
-    disk by :func:`codegen.compile_shared_library`, keyed by a hash of the source), loaded and its key
-    checked (:func:`codegen.load_shared_library`)."""
-    return codegen.load_shared_library(source)
+def _driver_library(source: str, libraries: tuple[Path, ...]) -> ctypes.CDLL:
+    """``source`` (a model's C source with kernels and a driver appended) compiled once, linked with the
+    shared ``libraries`` (cached on disk by :func:`codegen.compile_shared_library`, keyed by a hash of
+    the source and the libraries' paths), loaded and its key checked (:func:`codegen.load_shared_library`).
+    The libraries are loaded as its dependencies, not with global symbols: another SUNDIALS in the same
+    process (FMPy's) is not bound to them."""
+    return codegen.load_shared_library(source, libraries=libraries)
 
 
 @dataclass(frozen=True)
@@ -98,7 +93,7 @@ class Driver:
     label : str
         The integrator's name in failure messages.
     sundials : bool
-        It calls SUNDIALS (loaded first from scikit-sundae).
+        It calls SUNDIALS (linked with the libraries of scikit-sundae, :func:`sundials_libraries`).
     flag_names : str or None
         A C function ``const char *(int)`` naming its return codes that are no :class:`Result`'s.
     """
@@ -135,13 +130,12 @@ def driver_source(model: NumericModel, kind: str) -> str:
 def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
     """The shared library of ``model`` with the driver ``kind`` of :data:`DRIVERS` (:func:`driver_source`)."""
     if isinstance(model, ControlledModel):  # a run's view of a model: the model's own libraries
-        model = model.loop.model
+        model = model.uncontrolled
     libraries = _LOADED.setdefault(model, {})
     if kind not in libraries:
         spec = DRIVERS[kind]
-        if spec.sundials:
-            _load_sundials()
-        library = _driver_library(driver_source(model, kind))
+        linked = tuple(sundials_libraries()) if spec.sundials else ()
+        library = _driver_library(driver_source(model, kind), linked)
         function = getattr(library, spec.entry)
         function.argtypes, function.restype = [ctypes.POINTER(DriverOptions)], ctypes.c_int
         if spec.flag_names:

@@ -36,9 +36,11 @@ from ..core.errors import InputError
 from ..numeric.limit_kernels import LimitKernels, limit_kernels
 from ..numeric.numeric_model import NumericModel
 from ..numeric.projection import project_positions
-from ..numeric.tolerances import CONTACT_GAP, RESTING_GAP
+from ..numeric.tolerances import CONTACT_GAP, RESTING_GAP, SAME_INSTANT
 from ..symbolic.derivation import derive
+from .controllers import ControlledModel, solve_sampled
 from .problem import MultibodyProblem, Solution, Solver, derived_shapes
+from .stepping import stopped_text
 from .trajectory import LimitEvent, Result
 from .watch import LimitWatch
 
@@ -63,9 +65,12 @@ _CONTACT_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 def contact_model(model: NumericModel, active: tuple[int, ...]) -> NumericModel:
     """``model`` with the limit sides ``active`` (indices, increasing) held as constraints ``g_i(q) = 0``,
-    appended after its own (named ``"contact <side>"``); derived and compiled once per set."""
+    appended after its own (named ``"contact <side>"``); derived and compiled once per set.  Under a
+    controller (a :class:`~.controllers.ControlledModel`) the variant is under the same controller."""
     if not active:
         return model
+    if isinstance(model, ControlledModel):
+        return ControlledModel.of(contact_model(model.uncontrolled, active), model.loop)
     models = _CONTACT_MODELS.setdefault(model, {})
     if active not in models:
         system = model.equations.system
@@ -97,10 +102,16 @@ def check_start(model: NumericModel, q0: np.ndarray, t0: float, atol: float) -> 
                              "initial state")
 
 
-def solve_with_limits(solver: Solver, problem: MultibodyProblem,
-                      derived_of: Callable[[NumericModel, np.ndarray, np.ndarray], dict]) -> Solution:
+def solve_with_limits(solver: Solver, problem: MultibodyProblem, derived_of: Callable) -> Solution:
     """Integrate ``problem`` with ``solver``, segment by segment, through the limits' events (see the
-    module docstring); ``derived_of(model, t, y)`` computes the derived outputs a solver leaves out."""
+    module docstring); ``derived_of(model, t, y, parameters)`` computes the derived outputs a solver
+    leaves out, and the parameters at the outputs under a controller: ``(derived, parameters)``.
+
+    Under a controller (``problem.model`` a :class:`~.controllers.ControlledModel`) every segment's
+    model, a contact variant included, is under it; a :class:`~.controllers.Sampled` one keeps its
+    schedule, held inputs and state across the segments, and a sample instant that coincides with an
+    event (within :data:`~kronlag.numeric.tolerances.SAME_INSTANT`) is taken with the state before
+    the event (the impulse follows it)."""
     model, options = problem.model, solver.options
     if solver.name == "ggl":
         raise InputError("method='ggl' does not watch limits; use 'switching' (the default), 'compiled', "
@@ -122,6 +133,7 @@ class _LimitRun:
         self.pieces: list[dict[str, np.ndarray]] = []
         self._last_impulses: dict[int, float] = {}
         self.first_step = 0.0
+        self.loop = self.model.loop if isinstance(self.model, ControlledModel) else None
 
     def solve(self) -> Solution:
         problem, m, n = self.problem, self.problem.m, len(self.kernels)
@@ -142,7 +154,7 @@ class _LimitRun:
             segment = replace(problem, model=variant, t0=t, q0=y[:m], qd0=y[m:], watch=watch,
                               t_eval=t_eval if keep else None)
             budget = replace(self.options, max_steps=max(self.options.max_steps - steps, 0))
-            solution = type(self.solver)(budget).solve(segment)
+            solution = self._segment(type(self.solver)(budget), segment)
             steps, nfev, njev = steps + solution.steps, nfev + solution.nfev, njev + solution.njev
             self.events += solution.events
             if keep and len(solution.t):
@@ -155,7 +167,35 @@ class _LimitRun:
                 return self._solution(Result.SOLVER_FAILED, f"Integration failed at t = {last_t:.6g}: the limits' "
                                       f"events do not let time advance ({same_time} at this instant)",
                                       steps, nfev, njev)
+            if not self._sample_at(solution.stop.t, solution.stop.y):  # the sampled controller raised
+                stop = self.options.control.stop()
+                return self._solution(stop, stopped_text(solution.stop.t, stop), steps, nfev, njev)
             t, y = solution.stop.t, self._events(solution.stop.t, solution.stop.y, solution.stop.triggered)
+
+    def _segment(self, solver: Solver, segment: MultibodyProblem) -> Solution:
+        """One segment by ``solver``; under a sampled controller that the solver cannot stop at itself,
+        sample by sample (:func:`~.controllers.solve_sampled`)."""
+        if self.loop is None or not self.loop.sampled or solver.samples_inside:
+            return solver.solve(segment)
+        return solve_sampled(solver, segment, self.loop)
+
+    def _sample_at(self, t: float, y: np.ndarray) -> bool:
+        """Under a sampled controller, at an event at ``t``: the sample due at ``t`` (within
+        :data:`~kronlag.numeric.tolerances.SAME_INSTANT`, not yet taken by the segment) is taken with the
+        state before the event, as the compiled drivers take a sample at a root.  False if the controller
+        raised (recorded in the run control)."""
+        loop, m = self.loop, self.problem.m
+        if loop is None or not loop.sampled:
+            return True
+        due = loop.next_sample()
+        if due > t + SAME_INSTANT * max(1.0, abs(t)) or due >= self.problem.t1:
+            return True
+        try:
+            loop.sample(due, y[:m].copy(), y[m:].copy())
+        except (Exception, KeyboardInterrupt) as error:  # noqa: BLE001 - simulate raises it
+            self.options.control.record(error)
+            return False
+        return True
 
     # -- events ------------------------------------------------------------------------------
 
@@ -251,8 +291,9 @@ class _LimitRun:
         """The outputs of a segment with the contact rows taken out of the multipliers and residuals
         (they go to ``limit_forces``)."""
         r, s = self.model.r, self.model.s
-        derived = solution.derived if solution.derived is not None else self.derived_of(variant, solution.t,
-                                                                                          solution.y)
+        derived, parameters = solution.derived, solution.parameters
+        if derived is None:
+            derived, parameters = self.derived_of(variant, solution.t, solution.y, parameters)
         held = variant.r - r
         forces = np.zeros((len(solution.t), len(self.kernels)))
         for k, i in enumerate(self.active):
@@ -261,18 +302,23 @@ class _LimitRun:
         piece = dict(derived, lam=derived["lam"][:, :r], position_residual=derived["position_residual"][:, :r],
                      velocity_residual=np.concatenate([velocity[:, :r], velocity[:, r + held:r + held + s]], axis=1),
                      limit_forces=forces, t=solution.t, y=solution.y)
+        if parameters is not None:  # under a controller: the inputs at the outputs
+            piece["parameters"] = parameters
         self.pieces.append(piece)
 
     def _empty(self) -> dict[str, np.ndarray]:
         """The outputs of a run that ended before its first output."""
         m, r, s = self.model.shape
-        return {**{name: np.empty(shape) for name, shape in derived_shapes(0, m, r, s).items()},
-                "limit_forces": np.empty((0, len(self.kernels))), "t": np.empty(0), "y": np.empty((0, 2 * m))}
+        empty = {**{name: np.empty(shape) for name, shape in derived_shapes(0, m, r, s).items()},
+                 "limit_forces": np.empty((0, len(self.kernels))), "t": np.empty(0), "y": np.empty((0, 2 * m))}
+        if self.loop is not None:
+            empty["parameters"] = np.empty((0, len(self.model.parameter_names)))
+        return empty
 
     def _solution(self, result: Result, message: str, steps: int, nfev: int, njev: int) -> Solution:
         pieces = self.pieces or [self._empty()]
         joined = {key: np.concatenate([piece[key] for piece in pieces]) for key in pieces[0]}
-        t, y = joined.pop("t"), joined.pop("y")
+        t, y, parameters = joined.pop("t"), joined.pop("y"), joined.pop("parameters", None)
         events = tuple(sorted(self.events, key=lambda event: event.t))
         return Solution(t=t, y=y, result=result, message=message, nfev=nfev, njev=njev, steps=steps,
-                        derived=joined, events=events)
+                        derived=joined, events=events, parameters=parameters)

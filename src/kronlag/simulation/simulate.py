@@ -52,6 +52,7 @@ def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray,
     derived = {name: np.full(shape, np.nan) for name, shape in derived_shapes(len(times), *model.shape).items()}
     loop = model.loop if isinstance(model, ControlledModel) else None
     recorded = None if loop is None else np.empty((len(times), len(model.parameter_names)))
+    held = None if loop is None else loop.p.copy()  # a run with limits goes on with them after this
     for k, (t, y) in enumerate(zip(times, states)):
         q, qd = y[:m], y[m:]
         if loop is not None and parameters is not None:
@@ -67,6 +68,8 @@ def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray,
         derived["velocity_residual"][k] = B @ qd + c
         if recorded is not None:
             recorded[k] = loop.p
+    if held is not None:
+        loop.p[:] = held
     return derived, recorded
 
 
@@ -239,10 +242,7 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         problem = controlled(problem, loop)
     with control.catching_sigint():
         if has_limits(model):  # limits: segments between the impacts and contact changes
-            if loop is not None:
-                raise InputError("a controller and limits in one run are not supported yet: "
-                                 "write the feedback symbolically (docs/control.md)")
-            solution = solve_with_limits(solver(options), problem, lambda *state: _derived(*state)[0])
+            solution = solve_with_limits(solver(options), problem, _derived)
         elif loop is not None and loop.sampled and not solver.samples_inside:
             solution = solve_sampled(solver(options), problem, loop)
         else:

@@ -186,13 +186,19 @@ def _compile_command(compiler: CCompiler, flags: tuple[str, ...], source: Path, 
     return [*compiler.command, *flags, *_CFLAGS, *compiler.flags, "-c", "-o", str(output), str(source)]
 
 
-def _link_command(compiler: CCompiler, objects: list[Path], output: Path) -> list[str]:
-    """The command linking ``objects`` into the shared library ``output``, its undefined symbols
-    resolved at load time (the SUNDIALS calls of the compiled drivers); with an optimization level
-    because zig links a C runtime built for it (once per level: always the same one)."""
+def _link_command(compiler: CCompiler, objects: list[Path], output: Path,
+                  libraries: tuple[Path, ...] = ()) -> list[str]:
+    """The command linking ``objects`` into the shared library ``output``, with an optimization level
+    because zig links a C runtime built for it (once per level: always the same one).  The shared
+    ``libraries`` (paths: the SUNDIALS of the compiled drivers) are linked by path, with their
+    directories as run paths, so that loading ``output`` loads them as its own dependencies: no
+    library needs to be loaded with global symbols first (where another copy of SUNDIALS in the
+    process, FMPy's, would bind to them)."""
     undefined = ["-undefined", "dynamic_lookup"] if sys.platform == "darwin" else []
+    run_paths = [option for directory in dict.fromkeys(str(path.parent) for path in libraries)
+                 for option in ("-Xlinker", "-rpath", "-Xlinker", directory)]
     return [*compiler.command, _OPTIMIZATION, *compiler.flags, "-shared", "-pthread", *undefined, "-o", str(output),
-            *map(str, objects), "-lm"]
+            *map(str, objects), *map(str, libraries), *run_paths, "-lm"]
 
 
 def cache_directory() -> Path:
@@ -303,21 +309,22 @@ def _keyed_source(source: str, key: str) -> str:
             f"const char *{KEY_FUNCTION}(void) {{ return \"{key}\"; }}\n#endif\n")
 
 
-def _build_plan(source: str, parts: int) -> tuple[CCompiler, list[tuple[str, ...]], str]:
+def _build_plan(source: str, parts: int, libraries: tuple[Path, ...] = ()) -> tuple[CCompiler, list[tuple[str, ...]],
+                                                                                    str]:
     """The compiler, the optimization flags of each part and the library's key (a hash of them, the
-    compiler's identity and the source)."""
+    compiler's identity, the source and the paths of the shared libraries linked)."""
     compiler, failures = _choose(_candidates())
     if compiler is None:
         raise CompilerError(f"the C backend needs a working C compiler ({failures}); "
                             "use backend='python'")
     kernel_level = _LARGE_KERNEL_OPTIMIZATION if len(source) > C_LARGE_SOURCE else _OPTIMIZATION
     levels = [_SOLVER_FLAGS] + [(kernel_level,)] * (parts - 1) if parts > 1 else [(_OPTIMIZATION,)]
-    facts = (compiler.identity, *_CFLAGS, *map(" ".join, levels), source)
+    facts = (compiler.identity, *_CFLAGS, *map(" ".join, levels), source, *(f"link {path}" for path in libraries))
     key = hashlib.sha256("\0".join(facts).encode()).hexdigest()[:32]
     return compiler, levels, key
 
 
-def compile_shared_library(source: str, *, parts: int = 1) -> Path:
+def compile_shared_library(source: str, *, parts: int = 1, libraries: tuple[Path, ...] = ()) -> Path:
     """Compile C ``source`` into a shared library in :func:`cache_directory` (reused when intact).
 
     With ``parts > 1`` the source is compiled ``parts`` times in parallel with
@@ -331,18 +338,20 @@ def compile_shared_library(source: str, *, parts: int = 1) -> Path:
     :func:`load_shared_library` checks after loading.  The library is renamed into place, then its
     SHA-256 is written next to it (``<library>.sha256``); a library whose content does not match
     its recorded hash (truncated, replaced, or its build interrupted) is rebuilt, never returned.
+    ``libraries``: shared libraries (absolute paths) linked into it, with their directories as run
+    paths; their paths are part of the key.
 
     Raises
     ------
     CompilerError
         No compiler, or it failed.
     """
-    compiler, levels, key = _build_plan(source, parts)
+    compiler, levels, key = _build_plan(source, parts, libraries)
     target = _private_cache_directory() / f"kronlag_{key}.so"
-    return target if _intact(target) else _build(compiler, levels, _keyed_source(source, key), target)
+    return target if _intact(target) else _build(compiler, levels, _keyed_source(source, key), target, libraries)
 
 
-def load_shared_library(source: str, *, parts: int = 1) -> ctypes.CDLL:
+def load_shared_library(source: str, *, parts: int = 1, libraries: tuple[Path, ...] = ()) -> ctypes.CDLL:
     """:func:`compile_shared_library`, loaded with :mod:`ctypes` and checked to be the library of
     ``source``: one whose key does not match (the files of two models swapped, a truncated or
     foreign file) is rebuilt; if the rebuilt one does not match either, a :class:`CacheWarning`
@@ -353,23 +362,23 @@ def load_shared_library(source: str, *, parts: int = 1) -> ctypes.CDLL:
     CompilerError
         No compiler, it failed, or not even the library built privately carries the key.
     """
-    compiler, levels, key = _build_plan(source, parts)
+    compiler, levels, key = _build_plan(source, parts, libraries)
     source = _keyed_source(source, key)
     directory = _private_cache_directory()
     target = directory / f"kronlag_{key}.so"
     if _intact(target) and (library := _load_keyed(target, key)):
         return library
     try:
-        _build(compiler, levels, source, target)
+        _build(compiler, levels, source, target, libraries)
     except OSError as error:  # full, or made read-only since it was checked
         target = _fallback_directory(cache_directory(), f"writing there failed ({error})") / target.name
-        _build(compiler, levels, source, target)
+        _build(compiler, levels, source, target, libraries)
     if library := _load_keyed(target, key):
         return library
     private = _temporary_cache(f"the library {target} does not carry its key {key} after rebuilding")
     warnings.warn(f"the compiled library {target} still does not carry its key {key} after rebuilding it: "
                   f"building it again in the private temporary directory {private}", CacheWarning, stacklevel=2)
-    target = _build(compiler, levels, source, private / target.name)
+    target = _build(compiler, levels, source, private / target.name, libraries)
     if library := _load_keyed(target, key):
         return library
     raise CompilerError(f"the library built from this model's C code in {private} does not carry its key {key}")
@@ -395,8 +404,10 @@ def _load_keyed(path: Path, key: str) -> ctypes.CDLL | None:
     return None
 
 
-def _build(compiler: CCompiler, levels: list[tuple[str, ...]], source: str, target: Path) -> Path:
-    """Compile ``source`` (in parts, one per entry of ``levels``) into ``target``, then write its digest."""
+def _build(compiler: CCompiler, levels: list[tuple[str, ...]], source: str, target: Path,
+           libraries: tuple[Path, ...] = ()) -> Path:
+    """Compile ``source`` (in parts, one per entry of ``levels``) into ``target`` linked with the shared
+    ``libraries``, then write its digest."""
     parts = len(levels)
     with tempfile.TemporaryDirectory(dir=target.parent) as work:
         source_path = Path(work) / "model.c"
@@ -414,7 +425,7 @@ def _build(compiler: CCompiler, levels: list[tuple[str, ...]], source: str, targ
                   for process, error in zip(processes, errors) if process.returncode]
         built = Path(work) / "model.so"
         if not failed:
-            link = subprocess.run(_link_command(compiler, objects, built), capture_output=True, text=True)
+            link = subprocess.run(_link_command(compiler, objects, built, libraries), capture_output=True, text=True)
             failed = [f"exit status {link.returncode} (linking)\n{link.stderr[-4000:]}"] if link.returncode else []
         if failed or not built.is_file():
             output = failed[0] if failed else "no library was written"

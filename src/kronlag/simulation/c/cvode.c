@@ -340,6 +340,11 @@ int kronlag_cvode(kronlag_options *o)
         if (flag == CV_TOO_MUCH_WORK) flag = KRONLAG_RESULT_MAX_STEPS;
         if (flag < 0) break;
         int rooted = n_roots > 0 && flag == CV_ROOT_RETURN;
+        if (rooted) {  /* limits: which functions fell, asked before a sample at t restarts CVODE */
+            int found[n_roots];
+            CVodeGetRootInfo(mem, found);
+            for (int i = 0; i < n_roots; ++i) o->roots[i] = found[i] != 0;
+        }
         flag = KRONLAG_RESULT_SUCCESS;
         int order = 0;
         CVodeGetLastOrder(mem, &order);
@@ -375,13 +380,7 @@ int kronlag_cvode(kronlag_options *o)
             if (n_eval > 0) ++next;
         }
         if (flag) break;
-        if (rooted) {  /* limits: CVODE stopped at the root, t and x are there */
-            int found[n_roots];
-            CVodeGetRootInfo(mem, found);
-            for (int i = 0; i < n_roots; ++i) o->roots[i] = found[i] != 0;
-            flag = KRONLAG_RESULT_LIMIT;
-            break;
-        }
+        if (rooted) { flag = KRONLAG_RESULT_LIMIT; break; }  /* limits: CVODE stopped at the root, t and x are there */
         int stop = kl_progress_report(o, &progress, t);
         if (stop) { flag = stop; break; }
         if (ratio < KRONLAG_APPROACH_RTOL || kl_rank_rose(t, x, &data)) { flag = KRONLAG_RESULT_APPROACH; break; }
