@@ -149,6 +149,7 @@ def check_friction(system: System, friction: Friction, kind: str, what: str) -> 
     if not isinstance(friction, Friction):
         raise ModelError(f"{what}: friction must be a kronlag.Friction, got {type(friction).__name__}")
     dimension = system.dimension
+    assert dimension is not None  # add_joint checks it before it checks the friction
     if kind not in FRICTION_KINDS[dimension]:
         raise ModelError(f"{what}: friction is available on {' and '.join(FRICTION_KINDS[dimension])} joints, "
                          f"not on a {dimension}-d {kind} joint")
@@ -200,7 +201,8 @@ def friction_record(system: System, joint: Joint) -> sp.Matrix:
     couple rows 3..5), the indices of its multipliers in ``lambda`` (-1 past its k rows), the unit
     directions whose components are removed from the force and the couple (zero: none), then
     :data:`RECORD_FIELDS`."""
-    friction: Friction = joint.friction
+    friction = joint.friction
+    assert friction is not None  # called for the joints with friction only
     d = joint.dimension
     geometry = dict(joint.geometry)
     pose_a, pose_b = (Pose(Frame((0,) * d)) if body == GROUND else system.body(body).pose()

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import sympy as sp
 
@@ -43,6 +44,9 @@ from .loads import (
 )
 from .structure import describe
 from .symbols import MULTIPLIER_NAME, acceleration_symbol, check_name, speed_symbol, t
+
+if TYPE_CHECKING:
+    from .robot_formats.description import RobotDescription
 
 __all__ = ["System", "DrawingLine", "drive_name"]
 
@@ -103,6 +107,7 @@ class System:
         self.joints: list[Joint] = []
         self.drives: list[str] = []  # names of the constraints added by add_drive
         self.limits: list[Limit] = []
+        self.robot: RobotDescription | None = None  # set by the robot file readers (kronlag.model.robot_formats)
         if gravity is not None:
             vector = as_vector(gravity, "gravity", (2, 3))
             self._check_symbols(vector, "gravity", allow_q=False)

@@ -77,7 +77,9 @@ class LimitKernels:
     def c_address(self) -> int:
         """The address of the compiled ``kronlag_limit_gaps`` (the library stays loaded with this object)."""
         self._library = load_shared_library(self.c_source)
-        return ctypes.cast(self._library.kronlag_limit_gaps, ctypes.c_void_p).value
+        address = ctypes.cast(self._library.kronlag_limit_gaps, ctypes.c_void_p).value
+        assert address is not None  # a symbol the library exports is never at NULL
+        return address
 
 
 #: The kernels per system (shared by every model derived from it and their parameter variants).

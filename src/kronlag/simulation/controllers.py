@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +34,9 @@ from .interface import Controller
 from .problem import MultibodyProblem, Solution, Solver
 from .stepping import stopped_text
 from .trajectory import Result
+
+if TYPE_CHECKING:
+    from _ctypes import CFuncPtr
 
 __all__ = ["Sampled", "ControlLoop", "ControlledModel", "controlled", "solve_sampled", "file_controller", "CONTINUOUS",
            "SAMPLED"]
@@ -128,9 +131,13 @@ class ControlLoop:
             raise InputError("controller= with time-varying parameters is not supported: compute their time "
                              "dependence in the controller (it receives t)")
         self.model, self.control, self.t0 = model, control, t0
-        self.sampled = controller if isinstance(controller, Sampled) else None
+        self.sampled: Sampled | None = None
+        self.function: Callable[..., Any]
+        if isinstance(controller, Sampled):
+            self.sampled, self.function = controller, controller.f
+        else:
+            self.function = controller
         self.mode = SAMPLED if self.sampled else CONTINUOUS
-        self.function = controller.f if self.sampled else controller
         self.m = model.m
         #: The parameter vector the kernels read (kronlag_options.p_control; ControlledModel._constants).
         self.p = np.array(model.parameter_vector(t0), dtype=float)
@@ -140,7 +147,7 @@ class ControlLoop:
         self.keys: frozenset[str] | None = None
         self.samples = 0
         self.state = self.sampled.initial_state if self.sampled else None
-        self._callback = None
+        self._callback: CFuncPtr | None = None  # an interface.Controller
 
     # -- the values -----------------------------------------------------------------------
 
@@ -197,6 +204,7 @@ class ControlLoop:
         """Call a :class:`Sampled` controller at the sample instant ``t`` and write its values; the next
         sample time goes to the last entry of :attr:`buffer`."""
         sampled = self.sampled
+        assert sampled is not None  # called for a Sampled controller only
         if sampled.stateful:
             result = self.function(t, q, qd, self.state)
             if not (isinstance(result, tuple) and len(result) == 2):
@@ -224,7 +232,7 @@ class ControlLoop:
 
     # -- the compiled drivers -------------------------------------------------------------------
 
-    def c_callback(self) -> Controller:
+    def c_callback(self) -> CFuncPtr:
         """The ``controller`` of :class:`~.interface.DriverOptions`: reads ``[q, qd]`` from
         :attr:`buffer` (copies: the controller may keep them), calls the controller (or samples),
         writes :attr:`p`; returns 0, or the ``KRONLAG_RESULT_*`` code to end the run with (an
@@ -237,7 +245,7 @@ class ControlLoop:
         if self._callback is None:
             control, q, qd = self.control, self.buffer[:self.m], self.buffer[self.m:2 * self.m]
             function, p, index, write = self.function, self.p, self.index, self.write
-            interrupted = Result.INTERRUPTED.code
+            interrupted, raised = Result.INTERRUPTED.code, Result.RAISED.code
 
             def continuous(t: float) -> int:
                 values = None
@@ -255,7 +263,7 @@ class ControlLoop:
                     # float() of a value that is no number: located by write(); the controller's own
                     # exceptions as they are
                     control.record(_located(write, values, t, q) if _bad_value(error, values) else error)
-                return interrupted if control.interrupted else (control.stop().code if control.error else 0)
+                return interrupted if control.interrupted else (raised if control.error else 0)  # control.stop()
 
             def sampled(t: float) -> int:
                 try:
@@ -347,7 +355,7 @@ def solve_sampled(solver: Solver, problem: MultibodyProblem, loop: ControlLoop) 
 
     Outputs at a sample instant are those of the interval it starts (with the new inputs).  Under
     limits (``problem.watch``) a piece that ends at an event ends the solution there (its ``stop``)."""
-    options, every_step = solver.options, problem.t_eval is None
+    options = solver.options
     pieces: list[Solution] = []
     parameters: list[np.ndarray] = []
     t, y = problem.t0, problem.y0
@@ -355,7 +363,7 @@ def solve_sampled(solver: Solver, problem: MultibodyProblem, loop: ControlLoop) 
         t_next = min(loop.next_sample(), problem.t1)
         final = t_next >= problem.t1
         t_eval = None
-        if not every_step:
+        if problem.t_eval is not None:  # else every step
             times = problem.t_eval
             inside = times[(times >= t) & ((times <= t_next) if final else (times < t_next))]
             t_eval = inside if final else np.append(inside, t_next)  # the end state: for the next interval
@@ -375,6 +383,7 @@ def solve_sampled(solver: Solver, problem: MultibodyProblem, loop: ControlLoop) 
         except (Exception, KeyboardInterrupt) as error:  # noqa: BLE001 - simulate raises it
             options.control.record(error)
             stop = options.control.stop()
+            assert stop is not None  # the error just recorded
             pieces.append(replace(piece, t=piece.t[:0], y=piece.y[:0], result=stop, message=stopped_text(t, stop)))
             break
     last = pieces[-1]

@@ -169,6 +169,7 @@ class _LimitRun:
                                       steps, nfev, njev)
             if not self._sample_at(solution.stop.t, solution.stop.y):  # the sampled controller raised
                 stop = self.options.control.stop()
+                assert stop is not None  # _sample_at recorded the controller's error
                 return self._solution(stop, stopped_text(solution.stop.t, stop), steps, nfev, njev)
             t, y = solution.stop.t, self._events(solution.stop.t, solution.stop.y, solution.stop.triggered)
 

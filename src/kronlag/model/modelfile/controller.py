@@ -35,8 +35,10 @@ state (:mod:`.dimension_check`).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from fractions import Fraction
+from typing import TYPE_CHECKING, cast
 
 import sympy as sp
 
@@ -98,7 +100,8 @@ def _gain(reader: _Reader, value, entry: str) -> Gain:
             one, _ = si_unit(text)
         except ValueError as error:
             raise reader.error(f"{entry}.unit", str(error)) from None
-        return Gain(number * float(one.magnitude), text, Dimension(one.dimensionality))
+        # pint types an exponent as any scalar; a unit's are rational
+        return Gain(number * float(one.magnitude), text, Dimension(cast(Mapping[str, Fraction], one.dimensionality)))
     return Gain(reader.number(value, entry))
 
 
@@ -155,10 +158,10 @@ def read_controller(reader: _Reader, document: dict, model: ModelFile) -> Contro
         if coordinate not in coordinates:
             raise reader.error("controller.coordinate", f"unknown coordinate {coordinate!r}; coordinates are "
                                                         f"{', '.join(coordinates)}")
-        gains = {key: _gain(reader, table.get(key, 0.0), f"controller.{key}") for key in ("kp", "ki", "kd")}
+        pid_gains = {key: _gain(reader, table.get(key, 0.0), f"controller.{key}") for key in ("kp", "ki", "kd")}
         setpoint = _constant(reader, table.get("setpoint", 0), "controller.setpoint")
         return PID(_input(reader, model, table), coordinate, setpoint,
-                   period=reader.number(table["period"], "controller.period", positive=True), **gains)
+                   period=reader.number(table["period"], "controller.period", positive=True), **pid_gains)
     raise reader.error("controller.type", f"expected 'state_feedback' or 'pid', got {kind!r}")
 
 

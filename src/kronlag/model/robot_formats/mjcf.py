@@ -36,8 +36,8 @@ import sympy as sp
 from ..system import System
 from .description import JointLimits
 from .safe_xml import XmlDocument, numbers, read_xml
-from .tree import (NO_MASS, Inertial, TreeJoint, at_reference, build_system, check_inertia, orientation_rows,
-                   report_skipped, rpy_of)
+from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build_system, check_inertia,
+                   orientation_rows, report_skipped, robot_of, rpy_of, three)
 
 __all__ = ["load_mjcf", "add_rows"]
 
@@ -73,6 +73,7 @@ class _Reader:
         self.degrees = compiler is None or compiler.get("angle", "degree") == "degree"
         self.eulerseq = "xyz" if compiler is None else compiler.get("eulerseq", "xyz")
         if len(self.eulerseq) != 3 or any(c not in "xyzXYZ" for c in self.eulerseq):
+            assert compiler is not None  # the default eulerseq is valid
             raise document.error(compiler, f"eulerseq={self.eulerseq!r}: expected three of x, y, z, X, Y, Z")
         self.defaults: dict[str, dict[str, dict[str, str]]] = {}
         for default in root.findall("default"):
@@ -119,13 +120,13 @@ class _Reader:
         if key == "quat":
             return _quaternion_matrix(*self.numbers(element, values, key, 4))
         if key == "axisangle":
-            *axis, angle = self.numbers(element, values, key, 4)
-            return _axis_angle_matrix(np.array(axis), self.angle(angle))
+            *vector, angle = self.numbers(element, values, key, 4)
+            return _axis_angle_matrix(np.array(vector), self.angle(angle))
         if key == "euler":
             rotation = np.eye(3)
-            for axis, angle in zip(self.eulerseq, self.numbers(element, values, key, 3)):
-                turn = _axis_angle_matrix(np.eye(3)["xyz".index(axis.lower())], self.angle(angle))
-                rotation = rotation @ turn if axis.islower() else turn @ rotation
+            for letter, angle in zip(self.eulerseq, self.numbers(element, values, key, 3)):
+                turn = _axis_angle_matrix(np.eye(3)["xyz".index(letter.lower())], self.angle(angle))
+                rotation = rotation @ turn if letter.islower() else turn @ rotation
             return rotation
         if key == "xyaxes":
             values6 = np.array(self.numbers(element, values, key, 6))
@@ -190,7 +191,8 @@ def load_mjcf(path: str | Path) -> System:
             document.skip(child, "mujoco")
     reader = _Reader(document)
     option = root.find("option")
-    gravity = (0.0, 0.0, -9.81) if option is None else document.numbers(option, "gravity", 3, default=(0, 0, -9.81))
+    gravity = (0.0, 0.0, -9.81) if option is None else three(document.numbers(option, "gravity", 3,
+                                                                              default=(0, 0, -9.81)))
     worldbody = root.find("worldbody")
     if worldbody is None:
         raise document.error(root, "has no <worldbody>")
@@ -199,7 +201,7 @@ def load_mjcf(path: str | Path) -> System:
     specs: list[TreeJoint] = []
     shifts: dict[str, np.ndarray] = {"world": np.zeros(3)}
     joint_elements: dict[str, Element] = {}
-    visuals = []
+    visuals: list[VisualSpec] = []
 
     def read_body(body: Element, parent: str, childclass: str) -> None:
         values = reader.attributes(body, childclass)
@@ -284,9 +286,10 @@ def load_mjcf(path: str | Path) -> System:
 def _frame_of(document: XmlDocument, system: System, element: Element, key: str) -> tuple[str, sp.Matrix, sp.Matrix]:
     """``(link, origin, rotation)`` of the link named by ``element``'s attribute ``key`` (``world``: the ground)."""
     link = document.required(element, key)
-    if link not in system.robot.frames:
+    frames = robot_of(system).frames
+    if link not in frames:
         raise document.error(element, f"{key}={link!r} is not a body of the file")
-    frame = system.robot.frames[link]
+    frame = frames[link]
     return link, sp.Matrix(frame.origin), sp.Matrix(frame.rotation)
 
 
@@ -302,14 +305,14 @@ def add_rows(document: XmlDocument, system: System, element: Element, name: str,
     """Add the rows ``(suffix, expression)``; drop those identically zero (listed in
     ``system.robot.redundant``), refuse a nonzero constant (the loop cannot be closed)."""
     symbols = list(system.coordinates)
-    at = np.array([system.robot.q_reference.get(q.name, 0.0) for q in symbols])
+    at = np.array([robot_of(system).q_reference.get(q.name, 0.0) for q in symbols])
     for suffix, expression in rows:
         row = f"{name}.{suffix}"
         if not expression.free_symbols and abs(float(expression)) > _ZERO_ROW:
             raise document.error(element, f"row {suffix}: the constraint cannot be closed at the reference pose: "
                                           f"residual {float(expression):.3g}")
         if _identically_zero(expression, at, symbols):
-            system.robot.redundant.append(row)
+            robot_of(system).redundant.append(row)
         else:
             system.add_constraint(expression, name=row)
 
@@ -321,7 +324,7 @@ def _add_equality(document: XmlDocument, system: System, element: Element, index
         return
     name = element.get("name") or f"{element.tag}{index}"
     if element.tag == "joint":
-        coordinates = {joint.name: sp.Symbol(joint.coordinate) for joint in system.robot.joints if joint.coordinate}
+        coordinates = {joint.name: sp.Symbol(joint.coordinate) for joint in robot_of(system).joints if joint.coordinate}
         first = document.required(element, "joint1")
         second = element.get("joint2")
         for joint in (first, second):

@@ -30,8 +30,8 @@ from ..system import System
 from .description import JointLimits
 from .mjcf import add_rows
 from .safe_xml import XmlDocument, numbers, read_xml
-from .tree import (NO_MASS, Inertial, TreeJoint, at_reference, build_system, check_inertia, orientation_rows,
-                   report_skipped, rpy_matrix, rpy_of)
+from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build_system, check_inertia,
+                   orientation_rows, report_skipped, robot_of, rpy_matrix, rpy_of)
 
 __all__ = ["load_sdf"]
 
@@ -168,7 +168,9 @@ def load_sdf(path: str | Path) -> System:
         raise document.error(root, "the root element of an SDF file must be <sdf>")
     model = root.find("model")
     if model is None and root.find("world") is not None:
-        model = root.find("world").find("model")
+        model = root.find("world")
+        assert model is not None  # checked just above
+        model = model.find("model")
     if model is None:
         raise document.error(root, "has no <model>")
     links = {document.required(link, "name"): link for link in model.findall("link")}
@@ -204,13 +206,13 @@ def load_sdf(path: str | Path) -> System:
     for link, name in parent_joint.items():
         joint = joints[name]
         parent = (joint.findtext("parent") or "").strip()
-        kind = _TREE_TYPES[joint.get("type")]
+        kind = _TREE_TYPES[document.required(joint, "type")]
         axis = (1.0, 0.0, 0.0) if kind == "fixed" else tuple(_axis(document, joint, frames[link]))
         specs.append(TreeJoint(joint, name, kind, parent, link, _origin(np.linalg.inv(frames[parent]) @ frames[link]),
                                axis, _limits(document, joint)))
     order = {name: index for index, name in enumerate(joints)}
     specs.sort(key=lambda spec: order[spec.name])
-    visuals = []
+    visuals: list[VisualSpec] = []
     for link, element in links.items():
         for visual in element.findall("visual"):
             geometry = visual.find("geometry")
@@ -245,7 +247,8 @@ def _close(document: XmlDocument, system: System, joint: Element, name: str, pos
     parent, child = ((joint.findtext(tag) or "").strip() for tag in ("parent", "child"))
     at = poses.of(name, joint)  # the joint frame, model coordinates at the reference
     rows = []
-    frame_p, frame_c = system.robot.frames[parent], system.robot.frames[child]
+    link_frames = robot_of(system).frames
+    frame_p, frame_c = link_frames[parent], link_frames[child]
     origin_p, rotation_p = sp.Matrix(frame_p.origin), sp.Matrix(frame_p.rotation)
     origin_c, rotation_c = sp.Matrix(frame_c.origin), sp.Matrix(frame_c.rotation)
     in_parent = np.linalg.inv(frames[parent]) @ at

@@ -15,7 +15,9 @@ multiple of pi/2 is taken exactly (:func:`exact_angle`), which keeps the express
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import SupportsFloat, cast
 from xml.etree.ElementTree import Element
 
 import numpy as np
@@ -28,6 +30,15 @@ from ..rotations import MAX_ROTATION_FACTORS, RotationSequence
 from ..system import System
 from .description import JointLimits, RobotDescription, RobotFileWarning, RobotJoint, Visual, coordinate_name
 from .safe_xml import XmlDocument
+
+#: A visual as a reader gives it: ``(link, shape, size, pose in the link frame, filename)``.
+VisualSpec = tuple[str, str, tuple[float, ...], np.ndarray, str | None]
+
+
+def three(values: Sequence[float]) -> tuple[float, float, float]:
+    """The three numbers of ``values`` (a reader's ``numbers(..., 3)``) as a 3-tuple."""
+    x, y, z = values
+    return x, y, z
 
 __all__ = ["Inertial", "NO_MASS", "TreeJoint", "at_reference", "build_system", "check_inertia", "combine", "moved",
            "orientation_rows", "report_skipped", "rpy_matrix", "rpy_of", "transform"]
@@ -84,7 +95,7 @@ def combine(parts: list[Inertial]) -> Inertial:
     mass = sum(part.mass for part in parts)
     if mass == 0:
         return Inertial(0.0, np.zeros(3), sum((part.tensor for part in parts), np.zeros((3, 3))))
-    centre = sum(part.mass * part.centre for part in parts) / mass
+    centre = sum((part.mass * part.centre for part in parts), np.zeros(3)) / mass
     tensor = np.zeros((3, 3))
     for part in parts:
         d = part.centre - centre
@@ -176,7 +187,8 @@ def _matrix_factors(matrix: np.ndarray) -> list:
 
 def _compact(factors: list) -> list:
     """``factors`` with every run of more than three constant rotations replaced by three (z, y, x)."""
-    result, run = [], []
+    result: list = []
+    run: list = []
 
     def flush():
         result.extend(run if len(run) <= 3 else _matrix_factors(np.array(RotationSequence(run).matrix, dtype=float)))
@@ -200,7 +212,7 @@ def check_inertia(document: XmlDocument, element: Element, mass: float, tensor: 
     body = RigidBody("inertial", mass=sp.Float(mass), inertia=sp.Matrix((tensor + tensor.T) / 2),
                      position=(0, 0, 0), rotation=sp.eye(3))
     try:
-        body.check_values(lambda value, what: float(value))
+        body.check_values(lambda value, what: float(cast(SupportsFloat, value)))  # a SymPy number
     except ModelError as error:
         raise document.error(element, "<inertial>: " + str(error).removeprefix("body 'inertial': ")) from None
 
@@ -237,7 +249,7 @@ def _tree(document: XmlDocument, links: dict[str, Element], joints: list[TreeJoi
 
 def build_system(document: XmlDocument, *, name: str, file_format: str, links: dict[str, Element],
                  inertials: dict[str, Inertial], specs: list[TreeJoint],
-                 visuals: list[tuple[str, str, tuple[float, ...], np.ndarray, str | None]],
+                 visuals: Sequence[VisualSpec],
                  gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)) -> System:
     """The System of a kinematic tree in joint coordinates, with its :class:`RobotDescription`
     (``system.robot``); ``visuals`` are ``(link, shape, size, pose in the link frame, filename)``;
@@ -268,6 +280,7 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
     for spec in moving:
         if spec.mimic is not None and (spec.mimic[0] not in coordinate_of or spec.mimic[0] == spec.name):
             known = "a fixed joint" if any(s.name == spec.mimic[0] for s in specs) else "not a joint of the file"
+            assert spec.mimic_element is not None  # a reader that sets mimic sets its element
             raise document.error(spec.mimic_element, f"of joint {spec.name!r}: {spec.mimic[0]!r} is "
                                  f"{known if spec.mimic[0] != spec.name else 'the joint itself'}")
     actuated = [spec for spec in moving if spec.mimic is None]
@@ -342,9 +355,15 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
     return system
 
 
+def robot_of(system: System) -> RobotDescription:
+    """``system.robot`` of a system :func:`build_system` made (never ``None`` there)."""
+    assert system.robot is not None, "not a system read from a robot file"
+    return system.robot
+
+
 def at_reference(system: System, expression) -> np.ndarray:
     """A matrix of expressions of the coordinates at the file's reference pose, as floats."""
-    reference = {q: system.robot.q_reference.get(q.name, 0.0) for q in system.coordinates}
+    reference = {q: robot_of(system).q_reference.get(q.name, 0.0) for q in system.coordinates}
     return np.array(sp.Matrix(expression).subs(reference).evalf(), dtype=float)
 
 
@@ -358,9 +377,10 @@ def orientation_rows(rotation1: sp.Matrix, relative: np.ndarray, rotation2: sp.M
 
 def report_skipped(document: XmlDocument, system: System) -> None:
     """Record the elements the reader skipped in ``system.robot`` and warn once, listing them."""
-    system.robot.skipped = document.skipped_summary()
-    if system.robot.skipped:
-        warnings.warn(f"{document.source}: not used by kronlag (skipped): {system.robot.skipped}", RobotFileWarning,
+    robot = robot_of(system)
+    robot.skipped = document.skipped_summary()
+    if robot.skipped:
+        warnings.warn(f"{document.source}: not used by kronlag (skipped): {robot.skipped}", RobotFileWarning,
                       stacklevel=3)
 
 

@@ -25,7 +25,8 @@ import numpy as np
 from ..system import System
 from .description import JointLimits
 from .safe_xml import XmlDocument, read_xml
-from .tree import NO_MASS, Inertial, TreeJoint, build_system, check_inertia, report_skipped, rpy_matrix, transform
+from .tree import (NO_MASS, Inertial, TreeJoint, build_system, check_inertia, report_skipped, rpy_matrix, three,
+                   transform)
 
 __all__ = ["load_urdf", "JOINT_TYPES"]
 
@@ -85,7 +86,7 @@ def _inertial(document: XmlDocument, link: Element) -> Inertial:
 
 def _visuals(document: XmlDocument, link: Element) -> list[tuple[str, tuple[float, ...], np.ndarray, str | None]]:
     """``(shape, size, pose in the link frame, filename)`` of each ``<visual>`` with a geometry."""
-    found = []
+    found: list[tuple[str, tuple[float, ...], np.ndarray, str | None]] = []
     for visual in link.findall("visual"):
         geometry = visual.find("geometry")
         shape = None if geometry is None else next(iter(geometry), None)
@@ -140,7 +141,7 @@ def _joint(document: XmlDocument, element: Element) -> TreeJoint:
     if mimic_element is not None:
         mimic = (document.required(mimic_element, "joint"), document.number(mimic_element, "multiplier", 1.0),
                  document.number(mimic_element, "offset", 0.0))
-    return TreeJoint(element, name, kind, links[0], links[1], _origin(document, element), axis, limits, mimic,
+    return TreeJoint(element, name, kind, links[0], links[1], _origin(document, element), three(axis), limits, mimic,
                      mimic_element)
 
 

@@ -79,7 +79,7 @@ def header_directory(standard: Standard) -> Path:
     return directory
 
 
-def _c_array(values: Sequence[float]) -> str:
+def _c_array(values: Sequence[float] | np.ndarray) -> str:
     return "{" + ", ".join(repr(float(value)) for value in values) + (", 0.0}" if not len(values) else "}")
 
 
@@ -103,7 +103,9 @@ def reactions(model) -> tuple[str, list[str], dict[str, str]]:
     lam = [sp.Dummy(f"lambda{j}") for j in range(model.r)]
     system = model.equations.system
     row = {constraint.name: j for j, constraint in enumerate(system.constraints)}
-    expressions, names, units = {}, [], {}
+    expressions: dict[str, sp.Matrix] = {}
+    names: list[str] = []
+    units: dict[str, str] = {}
     for joint in system.joints:
         multipliers = sp.Matrix([lam[row[name]] for name in joint.constraint_names])
         expressions[f"J{len(expressions)}"] = sp.Matrix(joint.wrench) * multipliers
@@ -188,13 +190,13 @@ def compile_fmu(source: str, standard: Standard, identifier: str, binaries: Path
 def build_description(identifier: str, libraries: Sequence[str], standard: Standard) -> str:
     """``sources/buildDescription.xml`` (the FMI 3.0 format, which FMI 2.0.4 allows for source FMUs):
     the source file and the SUNDIALS libraries (file names ``lib<name>[-<hash>].so.<version>``)."""
-    links = []
+    links: list[str] = []
     for file in libraries:
         match = re.fullmatch(r"lib(\w+?)(?:-[0-9a-f]+)?\.so\.([\d.]+)", file)
         name, release = match.groups() if match else (file, "")
         links.append(f'    <Library name="{name}"{f" version={quoteattr(release)}" if release else ""} '
                      f'description={quoteattr(f"binaries/{standard.platform}/{file}")}/>\n')
-    links = "".join(links)
+    text = "".join(links)
     return ('<?xml version="1.0" encoding="UTF-8"?>\n'
             '<fmiBuildDescription fmiVersion="3.0">\n'
             f'  <BuildConfiguration modelIdentifier="{identifier}" description="links the SUNDIALS 7 libraries '
@@ -202,7 +204,7 @@ def build_description(identifier: str, libraries: Sequence[str], standard: Stand
             '    <SourceFileSet language="C99">\n'
             f'      <SourceFile name="{identifier}.c"/>\n'
             '    </SourceFileSet>\n'
-            f'{links}'
+            f'{text}'
             '  </BuildConfiguration>\n'
             '</fmiBuildDescription>\n')
 

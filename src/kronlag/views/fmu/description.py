@@ -14,7 +14,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import cast
 from xml.sax.saxutils import quoteattr
+
+import numpy as np
 
 from ...model.modelfile.units import si_unit
 
@@ -44,7 +47,8 @@ def base_unit(text: str) -> dict[str, float] | None:
         one, _ = si_unit(text)
     except ValueError:
         return None
-    exponents = {_BASE_UNITS[dimension]: power for dimension, power in one.dimensionality.items()
+    # pint types an exponent as any scalar; a unit's are real numbers
+    exponents = {_BASE_UNITS[dimension]: cast(float, power) for dimension, power in one.dimensionality.items()
                  if dimension in _BASE_UNITS}
     if len(exponents) < len(one.dimensionality):
         return None
@@ -108,7 +112,7 @@ class Layout:
                  f"#define KL_OUT_ENERGY {len(self.multipliers) + len(self.reactions)}"]
         return "\n".join(lines) + "\n"
 
-    def variables(self, *, start_state: Sequence[float], parameter_values: Sequence[float],
+    def variables(self, *, start_state: Sequence[float] | np.ndarray, parameter_values: Sequence[float] | np.ndarray,
                   calculated: Sequence[str], inputs: Sequence[str], settings: Sequence[float],
                   units: Mapping[str, str], reaction_units: Mapping[str, str],
                   independent_time: bool = False) -> list[Variable]:
@@ -166,11 +170,12 @@ def _scalar_variable(variable: Variable) -> str:
 
 def _unit_definitions(variables: Sequence[Variable]) -> str:
     """``UnitDefinitions`` of the units the variables use (none: the element left out)."""
-    used = sorted({variable.unit for variable in variables if variable.unit and base_unit(variable.unit)})
+    used = sorted({variable.unit for variable in variables if variable.unit})
+    bases = {name: found for name in used if (found := base_unit(name))}
     lines = []
-    for name in used:
+    for name, attributes in bases.items():
         base = " ".join(f'{key}="{value!r}"' if key == "factor" else f'{key}="{round(value)}"'
-                        for key, value in base_unit(name).items())
+                        for key, value in attributes.items())
         lines.append(f"    <Unit name={quoteattr(name)}><BaseUnit {base}/></Unit>\n")
     return f"  <UnitDefinitions>\n{''.join(lines)}  </UnitDefinitions>\n" if lines else ""
 
