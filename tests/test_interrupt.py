@@ -52,6 +52,9 @@ def test_sigint_during_a_run_hands_over_the_partial_trajectory(four_bar, method)
         if t > 0.5 and not interrupt_at_half_a_second.sent:
             interrupt_at_half_a_second.sent = True
             os.kill(os.getpid(), signal.SIGINT)
+        elif t > 100.0:  # a failure, not a run of hours, if the signal was not acted upon
+            raise AssertionError(f"SIGINT sent at t > 0.5 not acted upon by t = {t} "
+                                 f"(SIGINT handler: {signal.getsignal(signal.SIGINT)!r})")
 
     interrupt_at_half_a_second.sent = False
     with pytest.raises(KeyboardInterrupt, match="simulation interrupted at t = ") as caught:
