@@ -25,6 +25,7 @@ from sympy.printing.conventions import split_super_sub
 from ..core.errors import InputError
 from ..numeric.friction import friction_columns, friction_joints
 from ..numeric.reactions import GENERALIZED_FORCE_UNITS, REACTION_UNITS, multiplier_labels
+from ..simulation.labelled import rate_unit
 from ..simulation.trajectory import LimitEvent
 
 if TYPE_CHECKING:
@@ -110,11 +111,6 @@ def _with_unit(label: str, unit: str | None) -> str:
     return f"{label} ({unit})" if unit else label
 
 
-def _rate_unit(unit: str | None, units: Mapping[str, str], order: int = 1) -> str | None:
-    """The unit of a time derivative of order ``order``, ``unit/s`` or ``unit/s^2``, when both units are known."""
-    return f"{unit}/{units['t']}{'' if order == 1 else f'^{order}'}" if unit and "t" in units else None
-
-
 def _coordinates_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
     _plot_series(axes, traj.t, traj.q,
                  [_with_unit(_math_label(name), units.get(name)) for name in traj.coordinate_names],
@@ -123,7 +119,7 @@ def _coordinates_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -
 
 def _velocities_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
     _plot_series(axes, traj.t, traj.qd,
-                 [_with_unit(_math_label(name, dots=1), _rate_unit(units.get(name), units))
+                 [_with_unit(_math_label(name, dots=1), rate_unit(units.get(name), units))
                   for name in traj.coordinate_names],
                  title="Velocities", ylabel=r"$\dot{q}$")
 
@@ -418,9 +414,9 @@ def plot_kinematics(run: Kinematics, *, path: str | PathLike | None = None, show
     names = run.coordinate_names
     series = _kinematic_series(run, units)
     series[1:1] = [("Speeds", r"$\dot{q}$", run.qd,
-                    [_with_unit(_math_label(name, dots=1), _rate_unit(units.get(name), units)) for name in names]),
+                    [_with_unit(_math_label(name, dots=1), rate_unit(units.get(name), units)) for name in names]),
                    ("Accelerations", r"$\ddot{q}$", run.qdd, [_with_unit(_math_label(name, dots=2),
-                                                                              _rate_unit(units.get(name), units, 2))
+                                                                              rate_unit(units.get(name), units, 2))
                                                                    for name in names])]
     return _series_figure(run, series, f"kinematic analysis: {len(run.t)} samples", units=units, path=path,
                           show=show)
