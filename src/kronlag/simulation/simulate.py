@@ -197,7 +197,9 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         ``t`` (N,), ``q``, ``qd``, ``qdd`` (N, m), ``lam`` (N, r), ``mu`` (N, s),
         energies, residuals ``Phi(q)`` (N, r) and ``[Phi_q qd; A qd + b]``
         (N, r + s), counters, wall time and ``events`` (the singular
-        configurations passed).  On failure (a singular
+        configurations passed), ``intervals`` (which integrator ran where, and why: under
+        ``'switching'`` CVODE, with the minimum-norm multipliers for redundant constraints, and ALI3-P
+        near singular configurations).  On failure (a singular
         configuration, an integrator error, ``max_steps``) ``status`` is -1,
         ``message`` says why, and the arrays hold the solution up to the failure.
 
