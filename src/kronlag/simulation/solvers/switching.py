@@ -38,6 +38,8 @@ def redundant_at(model: NumericModel, q: np.ndarray, t: float) -> bool:
         return False
     _, singular_values, Vt = np.linalg.svd(Phi_q)
     null_space = Vt[rank:].T
+    if not null_space.size:  # every coordinate held: nothing can move, the rank cannot change
+        return True
     distance = REDUNDANCY_PROBE * (1.0 + np.max(np.abs(q)))
     # off the constraints by |Phi|, redundant rows have magnitudes of about |Phi|: projected well below
     # the rank tolerance, lest they count as independent
