@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...numeric.projection import project_positions
-from ...numeric.tolerances import REDUNDANCY_PROBE, matrix_rank
+from ...numeric.tolerances import REDUNDANCY_PROBE, REDUNDANCY_PROBE_RESIDUAL, matrix_rank
 from ..drivers import Segment, require, segment_status, solution_of
 from ..problem import MultibodyProblem, Solution, Solver
 from ..trajectory import MethodInterval
@@ -41,9 +41,7 @@ def redundant_at(model: NumericModel, q: np.ndarray, t: float) -> bool:
     if not null_space.size:  # every coordinate held: nothing can move, the rank cannot change
         return True
     distance = REDUNDANCY_PROBE * (1.0 + np.max(np.abs(q)))
-    # off the constraints by |Phi|, redundant rows have magnitudes of about |Phi|: projected well below
-    # the rank tolerance, lest they count as independent
-    tol = 1e-2 * model.rank_rtol * singular_values[0]
+    tol = REDUNDANCY_PROBE_RESIDUAL * model.rank_rtol * singular_values[0]
     weights = np.random.default_rng(0).standard_normal((null_space.shape[1], 2))  # generic, reproducible
     for direction in (null_space @ weights).T:
         for sign in (1.0, -1.0):
