@@ -36,7 +36,7 @@ import kronlag
 from kronlag.benchmarks.iftomm import BRICARD_ENERGY_SCALE, benchmark
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from helpers import DOUBLE_PARALLELOGRAM_VALUES, double_parallelogram  # noqa: E402
+from helpers import DOUBLE_PARALLELOGRAM_VALUES, double_parallelogram
 
 TOLERANCES = {"default": {"rtol": 1e-8, "atol": 1e-10}, "rtol 1e-10": {"rtol": 1e-10, "atol": 1e-12}}
 METHODS = {"new (default)": "auto", "old (ali3p)": "ali3p"}

@@ -17,14 +17,15 @@ multipliers), handing over to ALI3-P only near singular configurations, where th
 
 from __future__ import annotations
 
+import itertools
 import warnings
 
 import numpy as np
 import pytest
+from helpers import DOUBLE_PARALLELOGRAM_VALUES, double_parallelogram, needs_compiler
 from scipy.integrate import solve_ivp
 
 import kronlag
-from helpers import DOUBLE_PARALLELOGRAM_VALUES, double_parallelogram, needs_compiler
 from kronlag.benchmarks.iftomm import benchmark
 from kronlag.simulation.solvers.switching import redundant_at
 
@@ -171,7 +172,7 @@ def test_crossing_singular_configurations_hands_over_to_ali3p(parallelogram):
     assert intervals[0].method == "compiled" and "redundant constraints" in intervals[0].reason
     index3 = [interval for interval in intervals if interval.method == "ali3p"]
     assert len(index3) >= 10 and all("approach to a singular configuration" in i.reason for i in index3)
-    assert all(a.t_end == b.t_start for a, b in zip(intervals, intervals[1:]))
+    assert all(a.t_end == b.t_start for a, b in itertools.pairwise(intervals))
     assert (intervals[0].t_start, intervals[-1].t_end) == (0.0, 10.0)
     assert sum(interval.steps for interval in intervals) == run.steps
     passages = [event for event in run.events if isinstance(event, kronlag.SingularPassage)]
