@@ -22,7 +22,7 @@ __all__ = ["SwitchingSolver", "redundant_at"]
 
 
 #: Why a segment of each integrator began after the other one's (:attr:`MethodInterval.reason`).
-_HANDED_OVER = {True: "the approach to a singular configuration (Phi_q losing rank)",
+_HANDED_OVER = {True: "the approach to a singular configuration (where the rank of Phi_q changes)",
                 False: "the motion clear of the singular configuration"}
 
 
