@@ -52,7 +52,7 @@ __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAV
            "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "ZERO_EIGENVALUE_RTOL", "RESTING_GAP",
            "CONTACT_GAP", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "SAME_INSTANT", "integrator_tolerances",
            "zero_eigenvalue_threshold", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes",
-           "singular_ratio", "c_macros"]
+           "singular_ratio", "c_macros", "REDUNDANCY_PROBE", "REDUNDANCY_PROBE_RESIDUAL"]
 
 #: Default relative rank tolerance on ``[Phi_q; A]`` (see the module docstring).
 RANK_RTOL = 1e-8
@@ -103,6 +103,19 @@ FRICTION_MAX_ITERATIONS = 50
 #: event is taken at the event, with the state before it (as when the event falls on the sample
 #: instant; an event located to rounding may fall just before it, and a shorter segment is rounding).
 SAME_INSTANT = 1e-10
+
+# -- redundant constraints (issue 19.3) ----------------------------------------------------------
+#: A start where ``Phi_q`` is rank deficient is a case of *redundant constraints* (not a singular
+#: configuration) when the rank is the same at configurations on the constraints this far (times
+#: ``1 + max |q|``) from it along its null space: near a singular configuration the magnitude that
+#: vanished there grows like the distance (about 1e-4 here, far above ``RANK_RTOL``), while redundant
+#: rows stay dependent on the constraint manifold.  The switching method then starts with CVODE and the
+#: minimum-norm multipliers, else with ALI3-P.
+REDUNDANCY_PROBE = 1e-4
+#: The configurations probed are projected onto the constraints to ``max |Phi|`` at most this times
+#: ``rank_rtol`` times the largest singular value of ``Phi_q``: off the constraints by ``|Phi|``, redundant
+#: rows have magnitudes of about ``|Phi|``, which must stay well below the rank tolerance.
+REDUNDANCY_PROBE_RESIDUAL = 1e-2
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float,

@@ -29,7 +29,7 @@ from .solvers import (
     ProjectionSolver,
     SwitchingSolver,
 )
-from .trajectory import Result, SingularPassage, Trajectory
+from .trajectory import MethodInterval, Result, SingularPassage, Trajectory
 
 __all__ = [
     "simulate",
@@ -48,6 +48,7 @@ __all__ = [
     "InitialStateWarning",
     "Result",
     "SingularPassage",
+    "MethodInterval",
     "Trajectory",
     "AUTO_PREFERENCE",
 ]

@@ -391,7 +391,8 @@ def solve_sampled(solver: Solver, problem: MultibodyProblem, loop: ControlLoop) 
                     result=last.result, message=last.message, nfev=sum(piece.nfev for piece in pieces),
                     njev=sum(piece.njev for piece in pieces), steps=sum(piece.steps for piece in pieces),
                     events=tuple(event for piece in pieces for event in piece.events), stop=last.stop,
-                    parameters=np.concatenate(parameters))
+                    parameters=np.concatenate(parameters),
+                    intervals=tuple(interval for piece in pieces for interval in piece.intervals))
 
 
 def _without_last_row(solution: Solution) -> Solution:

@@ -130,6 +130,7 @@ class _LimitRun:
         self.kernels: LimitKernels = limit_kernels(self.model.equations.system)
         self.active: tuple[int, ...] = ()
         self.events: list = []
+        self.intervals: list = []
         self.pieces: list[dict[str, np.ndarray]] = []
         self._last_impulses: dict[int, float] = {}
         self.first_step = 0.0
@@ -157,6 +158,7 @@ class _LimitRun:
             solution = self._segment(type(self.solver)(budget), segment)
             steps, nfev, njev = steps + solution.steps, nfev + solution.nfev, njev + solution.njev
             self.events += solution.events
+            self.intervals += solution.intervals
             if keep and len(solution.t):
                 self._keep(solution, variant)
             if solution.result is not Result.LIMIT or solution.stop is None:
@@ -322,4 +324,4 @@ class _LimitRun:
         t, y, parameters = joined.pop("t"), joined.pop("y"), joined.pop("parameters", None)
         events = tuple(sorted(self.events, key=lambda event: event.t))
         return Solution(t=t, y=y, result=result, message=message, nfev=nfev, njev=njev, steps=steps,
-                        derived=joined, events=events, parameters=parameters)
+                        derived=joined, events=events, parameters=parameters, intervals=tuple(self.intervals))

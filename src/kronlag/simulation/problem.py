@@ -20,7 +20,7 @@ from ..core.errors import ProjectionError
 from ..numeric.projection import project_positions, project_velocities
 from ..numeric.tolerances import integrator_tolerances
 from .control import RunControl
-from .trajectory import Result, SingularPassage
+from .trajectory import MethodInterval, Result, SingularPassage
 from .watch import LimitStop, LimitWatch
 
 if TYPE_CHECKING:
@@ -128,6 +128,9 @@ class Solution:
     parameters : (N, P) or None
         Under a controller (:mod:`.controllers`), the parameter values at the outputs, when the
         solver recorded them (else :func:`simulate` does).
+    intervals : tuple of MethodInterval
+        Which integrator ran where, when the solver changes integrators (else :func:`simulate`
+        records one interval of its method).
     """
 
     t: np.ndarray
@@ -141,6 +144,7 @@ class Solution:
     events: tuple[SingularPassage, ...] = ()
     stop: LimitStop | None = None
     parameters: np.ndarray | None = None
+    intervals: tuple[MethodInterval, ...] = ()
 
     #: The keys of :attr:`derived` (:func:`derived_shapes`).
     DERIVED: ClassVar[tuple[str, ...]] = tuple(derived_shapes(0, 0, 0, 0))

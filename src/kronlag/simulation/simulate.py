@@ -22,7 +22,7 @@ from .controllers import ControlledModel, ControlLoop, Sampled, controlled, solv
 from .impacts import has_limits, solve_with_limits
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
 from .solvers import AUTO_PREFERENCE, METHODS, SAMPLED_PREFERENCE
-from .trajectory import Trajectory
+from .trajectory import MethodInterval, Trajectory
 
 if TYPE_CHECKING:
     from ..numeric.numeric_model import NumericModel
@@ -73,6 +73,21 @@ def _derived(model: NumericModel, times: np.ndarray, states: np.ndarray,
     return derived, recorded
 
 
+def _intervals(solution: Solution, method: str, t0: float) -> tuple[MethodInterval, ...]:
+    """The solver's :attr:`Solution.intervals` with neighbours of the same method joined (a run with
+    limits restarts at every event), or one interval of ``method`` over the run."""
+    if not solution.intervals:
+        t_end = float(solution.t[-1]) if len(solution.t) else t0
+        return (MethodInterval(method, t0, t_end, solution.steps, f"method {method!r}"),)
+    joined = [solution.intervals[0]]
+    for interval in solution.intervals[1:]:
+        if interval.method == joined[-1].method:
+            joined[-1] = replace(joined[-1], t_end=interval.t_end, steps=joined[-1].steps + interval.steps)
+        else:
+            joined.append(interval)
+    return tuple(joined)
+
+
 def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, started: float,
                 model: NumericModel, loop: ControlLoop | None) -> Trajectory:
     """The :class:`Trajectory` of ``solution`` (of ``model``, under ``loop``'s controller if any), with the
@@ -85,7 +100,8 @@ def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, star
                       method=method, message=solution.message, nfev=solution.nfev,
                       njev=solution.njev, steps=solution.steps, wall_time=time.perf_counter() - started,
                       events=solution.events, result=solution.result,
-                      inputs=loop.inputs(parameters) if loop is not None else {})
+                      inputs=loop.inputs(parameters) if loop is not None else {},
+                      intervals=_intervals(solution, method, problem.t0))
 
 
 def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, method: str | type[Solver] = "auto",
@@ -181,7 +197,9 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         ``t`` (N,), ``q``, ``qd``, ``qdd`` (N, m), ``lam`` (N, r), ``mu`` (N, s),
         energies, residuals ``Phi(q)`` (N, r) and ``[Phi_q qd; A qd + b]``
         (N, r + s), counters, wall time and ``events`` (the singular
-        configurations passed).  On failure (a singular
+        configurations passed), ``intervals`` (which integrator ran where, and why: under
+        ``'switching'`` CVODE, with the minimum-norm multipliers for redundant constraints, and ALI3-P
+        near singular configurations).  On failure (a singular
         configuration, an integrator error, ``max_steps``) ``status`` is -1,
         ``message`` says why, and the arrays hold the solution up to the failure.
 

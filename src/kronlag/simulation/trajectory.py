@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
     from ..numeric.numeric_model import NumericModel
 
-__all__ = ["Trajectory", "SingularPassage", "LimitEvent", "Result"]
+__all__ = ["Trajectory", "SingularPassage", "LimitEvent", "Result", "MethodInterval"]
 
 
 class Result(enum.Enum):
@@ -119,6 +119,34 @@ class SingularPassage:
     def __str__(self) -> str:
         return (f"singular configuration at t = {self.t:.6g} (sigma ratio {self.ratio:.2g}; constraints "
                 f"{', '.join(self.constraints)}), q = {np.array2string(self.q, precision=6)}")
+
+
+@dataclass(frozen=True)
+class MethodInterval:
+    """Which integrator ran over which interval of a run, and why (:attr:`Trajectory.intervals`).
+
+    Attributes
+    ----------
+    method : str
+        ``name`` of the :class:`~kronlag.simulation.Solver` that integrated ``[t_start, t_end]``: under
+        the switching method ``"compiled"`` (CVODE) or ``"ali3p"``.
+    t_start, t_end : float
+    steps : int
+        Its accepted steps.
+    reason : str
+        Why it ran there: the method asked for, the rank of ``Phi_q`` at the start (redundant
+        constraints: the multipliers are then the minimum-norm ones), the approach to a singular
+        configuration or the motion clear of one.
+    """
+
+    method: str
+    t_start: float
+    t_end: float
+    steps: int
+    reason: str
+
+    def __str__(self) -> str:
+        return f"{self.method} from t = {self.t_start:.6g} to {self.t_end:.6g} ({self.steps} steps): {self.reason}"
 
 
 @dataclass(frozen=True)
@@ -248,6 +276,9 @@ class Trajectory(ColumnExport):
     inputs : dict of str to (N,)
         Under ``simulate(controller=...)``, the values the controller set, by parameter name, at
         the outputs (held values between samples of a ``Sampled`` one); else empty.
+    intervals : tuple of MethodInterval
+        Which integrator ran over which interval and why, in time order (one interval unless the
+        switching method changed integrators, e.g. ALI3-P near a singular configuration).
 
     Notes
     -----
@@ -286,6 +317,7 @@ class Trajectory(ColumnExport):
     result: Result = Result.SUCCESS
     limit_forces: np.ndarray | None = None
     inputs: dict[str, np.ndarray] = field(default_factory=dict)
+    intervals: tuple[MethodInterval, ...] = ()
 
     @property
     def status(self) -> int:

@@ -146,14 +146,21 @@ static void kl_constraints(double t, const double *q, const double *p, double *t
 }
 
 /* 1 when [Phi_q; A] at (t, q) has clearly more independent rows than data->generic_rank, the cap
- * of the right-hand side (only possible when that rank was below the number of rows). */
+ * of the right-hand side (only possible when that rank was below the number of rows).  Without
+ * nonholonomic rows, from the small Phi_q kernel: checked at every step of a run with redundant
+ * constraints, where the dynamics kernel would cost as much as a right-hand side. */
 static int kl_rank_rose(double t, const double *q, const kl_data *data)
 {
     enum { steps = KL_K < KL_M ? KL_K : KL_M };
     if (data->generic_rank >= steps) return 0;
     double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1], magnitudes[KL_K + 1];
     int perm[KL_K + 1];
-    kl_constraints(t, q, data->p, terms, B, c);
+    if (KL_S == 0) {
+        double zero[KL_M + 1] = {0.0};
+        kronlag_Phi_q(t, q, zero, data->p, B);
+    } else {
+        kl_constraints(t, q, data->p, terms, B, c);
+    }
     rank_magnitudes(B, KL_K, KL_M, magnitudes, perm);
     return magnitudes[data->generic_rank] > KRONLAG_LEAVE_RTOL * magnitudes[0];
 }
