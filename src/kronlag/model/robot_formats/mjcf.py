@@ -36,7 +36,7 @@ import sympy as sp
 from ..system import System
 from .description import JointLimits
 from .safe_xml import XmlDocument, numbers, read_xml
-from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build_system, check_inertia,
+from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build_system, check_inertia, combine,
                    orientation_rows, report_skipped, robot_of, rpy_of, three)
 
 __all__ = ["load_mjcf", "add_rows"]
@@ -75,6 +75,10 @@ class _Reader:
         if len(self.eulerseq) != 3 or any(c not in "xyzXYZ" for c in self.eulerseq):
             assert compiler is not None  # the default eulerseq is valid
             raise document.error(compiler, f"eulerseq={self.eulerseq!r}: expected three of x, y, z, X, Y, Z")
+        self.from_geoms = "auto" if compiler is None else compiler.get("inertiafromgeom", "auto")
+        if self.from_geoms not in ("auto", "true", "false"):
+            assert compiler is not None
+            raise document.error(compiler, f"inertiafromgeom={self.from_geoms!r}: expected auto, true or false")
         self.defaults: dict[str, dict[str, dict[str, str]]] = {}
         for default in root.findall("default"):
             self._read_default(default, {}, "main")
@@ -144,13 +148,58 @@ class _Reader:
     def pose(self, element: Element, values: dict) -> tuple[np.ndarray, np.ndarray]:
         return np.array(self.numbers(element, values, "pos", 3, default=(0, 0, 0))), self.orientation(element, values)
 
-    def inertial(self, body: Element, shift: np.ndarray) -> Inertial:
-        """The body's inertial in its link frame, whose origin is ``shift`` in the body frame."""
+    def geom_frame(self, geom: Element, values: dict) -> tuple[str, tuple[float, ...], np.ndarray, np.ndarray]:
+        """``(type, size, position, rotation)`` of a geom in its body's frame; ``fromto`` (capsule,
+        cylinder, box, ellipsoid) gives the position (the middle), the z axis and the half length."""
+        shape = values.get("type", "sphere")
+        size = self.numbers(geom, values, "size", len((values.get("size") or "0").split()), default=(0.0,))
+        if "fromto" in values and shape in ("capsule", "cylinder", "box", "ellipsoid"):
+            ends = np.array(self.numbers(geom, values, "fromto", 6)).reshape(2, 3)
+            axis = ends[1] - ends[0]
+            half = float(np.linalg.norm(axis)) / 2
+            if half == 0:
+                raise self.document.error(geom, "fromto: the two ends coincide")
+            turn = np.cross([0.0, 0.0, 1.0], axis / (2 * half))
+            angle = math.atan2(float(np.linalg.norm(turn)), float(axis[2] / (2 * half)))
+            rotation = _axis_angle_matrix(turn, angle) if np.linalg.norm(turn) > 1e-15 else (
+                np.eye(3) if axis[2] > 0 else np.diag([1.0, -1.0, -1.0]))
+            size = (size[0], half) if shape in ("capsule", "cylinder") else (size[0], size[1], half)
+            return shape, size, ends.mean(axis=0), rotation
+        position, rotation = self.pose(geom, values)
+        return shape, size, position, rotation
+
+    def geom_inertial(self, geom: Element, values: dict) -> Inertial | None:
+        """A geom's inertial in its body's frame by MuJoCo's rules (uniform density, default 1000, or
+        the geom's ``mass``); ``None`` for a geom without volume (a plane)."""
+        shape, size, position, rotation = self.geom_frame(geom, values)
+        if shape == "plane":
+            return None
+        needed = _GEOM_SIZES.get(shape)
+        if needed is None:
+            raise self.document.error(geom, f"type {shape!r}: kronlag computes inertia from sphere, capsule, "
+                                            "cylinder, box and ellipsoid geoms; give the body an <inertial>")
+        if len(size) < needed or any(x <= 0 for x in size[:needed]):
+            raise self.document.error(geom, f"size={values.get('size')!r}: a {shape} needs {needed} positive sizes")
+        volume, unit = _geom_volume_inertia(shape, size[:needed])
+        mass = (self.numbers(geom, values, "mass", 1)[0] if "mass" in values
+                else self.numbers(geom, values, "density", 1, default=(1000.0,))[0] * volume)
+        if mass < 0:
+            raise self.document.error(geom, f"mass {mass:g}: a mass must not be negative")
+        return Inertial(mass, position, rotation @ np.diag(mass * unit) @ rotation.T)
+
+    def inertial(self, body: Element, shift: np.ndarray, childclass: str) -> Inertial:
+        """The body's inertial in its link frame, whose origin is ``shift`` in the body frame: its
+        ``<inertial>``, else (``<compiler inertiafromgeom>`` ``auto``, the default, or ``true``)
+        from its geoms; no mass without either."""
         inertial = body.find("inertial")
+        geoms = body.findall("geom")
+        if self.from_geoms == "true" or (inertial is None and self.from_geoms == "auto" and geoms):
+            parts = [part for geom in geoms
+                     if (part := self.geom_inertial(geom, self.attributes(geom, childclass))) is not None]
+            combined = combine(parts) if parts else NO_MASS
+            check_inertia(self.document, body, combined.mass, combined.tensor)
+            return Inertial(combined.mass, combined.centre - shift, combined.tensor)
         if inertial is None:
-            if any(geom.get("type", "sphere") != "plane" for geom in body.findall("geom")):
-                raise self.document.error(body, "has geoms but no <inertial>: kronlag does not compute inertia "
-                                                "from geoms; give <inertial pos=... mass=... diaginertia=...>")
             return NO_MASS
         values = inertial.attrib
         mass = self.document.number(inertial, "mass")
@@ -162,6 +211,33 @@ class _Reader:
         check_inertia(self.document, body, mass, tensor)
         position, rotation = self.pose(inertial, values)
         return Inertial(mass, position - shift, rotation @ tensor @ rotation.T)
+
+
+#: The number of sizes each geom type's volume needs (MJCF sizes are radii and half lengths).
+_GEOM_SIZES = {"sphere": 1, "capsule": 2, "cylinder": 2, "box": 3, "ellipsoid": 3}
+
+
+def _geom_volume_inertia(shape: str, size: tuple[float, ...]) -> tuple[float, np.ndarray]:
+    """A geom's volume and its central principal moments per unit mass (MuJoCo's formulas; a capsule
+    is a cylinder and two hemispheres, as MuJoCo's compiler sums them)."""
+    if shape == "sphere":
+        (r,) = size
+        return 4 / 3 * math.pi * r ** 3, np.full(3, 2 / 5 * r * r)
+    if shape == "box":
+        a, b, c = size
+        return 8 * a * b * c, np.array([b * b + c * c, a * a + c * c, a * a + b * b]) / 3
+    if shape == "ellipsoid":
+        a, b, c = size
+        return 4 / 3 * math.pi * a * b * c, np.array([b * b + c * c, a * a + c * c, a * a + b * b]) / 5
+    r, half = size
+    h = 2 * half
+    cylinder = math.pi * r * r * h
+    if shape == "cylinder":
+        return cylinder, np.array([(3 * r * r + h * h) / 12, (3 * r * r + h * h) / 12, r * r / 2])
+    sphere = 4 / 3 * math.pi * r ** 3
+    volume = cylinder + sphere
+    side = (cylinder * (3 * r * r + h * h) / 12 + 2 / 5 * sphere * r * r + sphere * h * (3 * r + 2 * h) / 8)
+    return volume, np.array([side, side, cylinder * r * r / 2 + 2 / 5 * sphere * r * r]) / volume
 
 
 def _origin(position: np.ndarray, rotation: np.ndarray) -> tuple[float, ...]:
@@ -244,7 +320,7 @@ def load_mjcf(path: str | Path) -> System:
             specs.append(TreeJoint(body, f"{name}:weld", "fixed", parent, name, _origin(position, rotation),
                                    (1.0, 0.0, 0.0)))
         links[name], shifts[name] = body, anchor
-        inertials[name] = reader.inertial(body, anchor)
+        inertials[name] = reader.inertial(body, anchor, childclass)
         for geom in body.findall("geom"):
             read_geom(geom, name, childclass, anchor)
         for child in body:
@@ -255,9 +331,7 @@ def load_mjcf(path: str | Path) -> System:
 
     def read_geom(geom: Element, link: str, childclass: str, anchor: np.ndarray) -> None:
         attributes = reader.attributes(geom, childclass)
-        shape = attributes.get("type", "sphere")
-        size = numbers(attributes.get("size", "0")) or (0.0,)
-        position, rotation = reader.pose(geom, attributes)
+        shape, size, position, rotation = reader.geom_frame(geom, attributes)
         pose = np.eye(4)
         pose[:3, :3], pose[:3, 3] = rotation, position - anchor
         full = {"box": lambda: tuple(2 * x for x in size[:3]), "sphere": lambda: size[:1],  # MJCF: half sizes
