@@ -78,3 +78,76 @@ def test_mjcf_geom_inertia_refusals(tmp_path):
                     '<geom type="mesh" mesh="part"/></body></worldbody></mujoco>')
     with pytest.raises(ModelFileError, match=r"mesh\.xml:1: <geom>: type 'mesh': kronlag computes inertia"):
         kronlag.load_mjcf(path)
+
+
+# -- absolute body coordinates ---------------------------------------------------------------------
+
+ARM = """<robot name="arm">
+  <link name="base"/>
+  <link name="upper"><inertial><origin xyz="0.25 0.01 0" rpy="0.1 0 0"/><mass value="2"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.04" iyz="0" izz="0.04"/></inertial></link>
+  <link name="lower"><inertial><origin xyz="0.2 0 0.02"/><mass value="1"/>
+    <inertia ixx="0.002" ixy="0.0003" ixz="0" iyy="0.02" iyz="0" izz="0.021"/></inertial></link>
+  <link name="slider"><inertial><origin xyz="0.01 0 0.0"/><mass value="0.5"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.002"/></inertial></link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 0.3" rpy="0 0.2 0"/><axis xyz="0 0 1"/></joint>
+  <joint name="elbow" type="continuous"><parent link="upper"/><child link="lower"/>
+    <origin xyz="0.5 0 0" rpy="0.3 0 0"/><axis xyz="0 0.6 0.8"/></joint>
+  <joint name="slide" type="prismatic"><parent link="lower"/><child link="slider"/>
+    <origin xyz="0.4 0 0"/><axis xyz="1 0 0"/></joint>
+</robot>"""
+
+
+def _quaternion_rate(e, omega):
+    """d/dt of the Euler parameters of R with the world angular velocity omega (R e_body = e_world)."""
+    e0, v = e[0], np.asarray(e[1:])
+    return np.concatenate([[-0.5 * omega @ v], 0.5 * (e0 * omega + np.cross(omega, v))])
+
+
+@pytest.mark.slow
+def test_absolute_coordinates_give_the_same_motion(tmp_path):
+    """An arm with a tilted revolute, a general-axis revolute and a prismatic joint, actuated: read in
+    joint and in absolute body coordinates; at random states (the absolute state mapped from the joint
+    state exactly) the absolute forward dynamics, mapped back through the joint values, gives the
+    joint coordinates' accelerations."""
+    from kronlag.model.rotations import euler_parameters_of
+
+    path = tmp_path / "arm.urdf"
+    path.write_text(ARM)
+    joint = kronlag.load_urdf(path)
+    absolute = kronlag.load_urdf(path, coordinates="absolute")
+    assert [c.name for c in absolute.constraints][3:8] == ["shoulder.x", "shoulder.y", "shoulder.z",
+                                                            "shoulder.axis1", "shoulder.axis2"]
+    assert len(absolute.coordinates) == 21 and absolute.robot.joint_values.keys() == {"shoulder", "elbow", "slide"}
+    tau = {"tau_shoulder": 0.7, "tau_elbow": -0.4, "tau_slide": 1.3}
+    joint_model = kronlag.derive(joint).numeric({**joint.robot.values, **tau}, backend="python")
+    absolute_model = kronlag.derive(absolute).numeric({**absolute.robot.values, **tau}, backend="python")
+    qs = joint.coordinates
+    qds = sp.symbols("v0:3")
+    X = absolute.coordinates
+    values = [absolute.robot.joint_values[name] for name in ("shoulder", "elbow", "slide")]
+    gradient = sp.lambdify(X, sp.Matrix(values).jacobian(X))
+    hessians = [sp.lambdify(X, sp.hessian(value, X)) for value in values]
+    rng = np.random.default_rng(21)
+    for _ in range(2):
+        q, qd = rng.uniform(-1, 1, 3), rng.uniform(-1, 1, 3)
+        at = dict(zip(qs, q))
+        state, rate = [], []
+        for body in joint.bodies:
+            position = sp.Matrix(body.position)
+            rotation = sp.Matrix(body.rotation)
+            rotation_rate = sum((rotation.diff(s) * v for s, v in zip(qs, qd)), sp.zeros(3, 3))
+            R = np.array(rotation.subs(at).evalf(), dtype=float)
+            spin = np.array(rotation_rate.subs(at).evalf(), dtype=float) @ R.T
+            omega = np.array([spin[2, 1], spin[0, 2], spin[1, 0]])
+            e = euler_parameters_of(R)
+            state += [*np.array(position.subs(at).evalf(), dtype=float).ravel(), *e]
+            rate += [*np.array(position.jacobian(qs).subs(at).evalf(), dtype=float) @ qd,
+                     *_quaternion_rate(e, omega)]
+        state, rate = np.array(state), np.array(rate)
+        expected = joint_model.forward_dynamics(q, qd).qdd
+        accelerations = absolute_model.forward_dynamics(state, rate).qdd
+        mapped = gradient(*state) @ accelerations + np.array([rate @ h(*state) @ rate for h in hessians])
+        assert np.abs(gradient(*state) @ rate - qd).max() <= 1e-12
+        assert np.abs(mapped - expected).max() <= 1e-9 * np.abs(expected).max(), (mapped, expected)

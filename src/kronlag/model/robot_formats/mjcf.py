@@ -27,6 +27,7 @@ refused (not supported yet), as is a ``ref`` other than 0.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from xml.etree.ElementTree import Element
 
@@ -244,8 +245,16 @@ def _origin(position: np.ndarray, rotation: np.ndarray) -> tuple[float, ...]:
     return (*map(float, position), *rpy_of(rotation))
 
 
-def load_mjcf(path: str | Path) -> System:
+def load_mjcf(path: str | Path, *, coordinates: str = "joint", package_paths: Sequence[str | Path] = ()) -> System:
     """Read an MJCF (MuJoCo XML) file into a :class:`~kronlag.System` (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+    coordinates : {"joint", "absolute"}
+        Joint coordinates (default) or absolute body coordinates (:mod:`.absolute`).
+    package_paths : sequence of paths
+        Folders searched first for mesh files (:mod:`.meshes`).
 
     Returns
     -------
@@ -349,7 +358,8 @@ def load_mjcf(path: str | Path) -> System:
         else:
             document.skip(child, "worldbody")
     system = build_system(document, name=root.get("model") or Path(path).stem, file_format="mjcf", links=links,
-                          inertials=inertials, specs=specs, visuals=visuals, gravity=gravity)
+                          inertials=inertials, specs=specs, visuals=visuals, gravity=gravity,
+                          coordinates=coordinates, package_paths=package_paths)
     equality = root.find("equality")
     for index, element in enumerate(() if equality is None else list(equality)):
         _add_equality(document, system, element, index, shifts)
@@ -398,7 +408,7 @@ def _add_equality(document: XmlDocument, system: System, element: Element, index
         return
     name = element.get("name") or f"{element.tag}{index}"
     if element.tag == "joint":
-        coordinates = {joint.name: sp.Symbol(joint.coordinate) for joint in robot_of(system).joints if joint.coordinate}
+        coordinates = robot_of(system).joint_values
         first = document.required(element, "joint1")
         second = element.get("joint2")
         for joint in (first, second):
