@@ -151,3 +151,119 @@ def test_absolute_coordinates_give_the_same_motion(tmp_path):
         mapped = gradient(*state) @ accelerations + np.array([rate @ h(*state) @ rate for h in hessians])
         assert np.abs(gradient(*state) @ rate - qd).max() <= 1e-12
         assert np.abs(mapped - expected).max() <= 1e-9 * np.abs(expected).max(), (mapped, expected)
+
+
+# -- meshes: bounds, search paths, missing meshes, the drawing -------------------------------------
+
+TRIANGLES = np.array([[[0, 0, 0], [1, 0, 0], [0, 2, 0]], [[0, 0, -1], [1, 2, 3], [0.5, -0.5, 0]]], dtype=float)
+
+
+def _binary_stl(path):
+    with open(path, "wb") as file:
+        file.write(b"\0" * 80 + struct.pack("<I", len(TRIANGLES)))
+        for triangle in TRIANGLES:
+            file.write(struct.pack("<3f", 0, 0, 1) + struct.pack("<9f", *triangle.ravel()) + b"\0\0")
+
+
+def _ascii_stl(path):
+    facets = "".join("facet normal 0 0 1\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in t)
+                     + "endloop\nendfacet\n" for t in TRIANGLES)
+    path.write_text(f"solid part\n{facets}endsolid part\n")
+
+
+def _obj(path):
+    path.write_text("# part\n" + "".join(f"v {x} {y} {z}\n" for x, y, z in TRIANGLES.reshape(-1, 3)) + "f 1 2 3\n")
+
+
+def _dae(path):
+    vertices = " ".join(str(x) for x in TRIANGLES.ravel())
+    path.write_text(f"""<?xml version="1.0"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+<asset><unit meter="0.5"/><up_axis>Z_UP</up_axis></asset>
+<library_geometries><geometry id="g"><mesh>
+  <source id="p"><float_array id="pa" count="18">{vertices}</float_array></source>
+  <vertices id="v"><input semantic="POSITION" source="#p"/></vertices></mesh></geometry></library_geometries>
+<library_visual_scenes><visual_scene id="s"><node id="n"><translate>1 0 0</translate>
+  <instance_geometry url="#g"/></node></visual_scene></library_visual_scenes></COLLADA>""")
+
+
+@pytest.mark.parametrize("write, suffix, expected", [
+    (_binary_stl, ".stl", ([0, -0.5, -1], [1, 2, 3])),
+    (_ascii_stl, ".stl", ([0, -0.5, -1], [1, 2, 3])),
+    (_obj, ".obj", ([0, -0.5, -1], [1, 2, 3])),
+    (_dae, ".dae", ([0.5, -0.25, -0.5], [1, 1, 1.5])),  # translated by 1 (node), then halved (unit)
+])
+def test_mesh_bounds(tmp_path, write, suffix, expected):
+    path = tmp_path / f"part{suffix}"
+    write(path)
+    low, high = mesh_bounds(path)
+    assert np.allclose(low, expected[0]) and np.allclose(high, expected[1])
+
+
+def test_mesh_search_paths(tmp_path, monkeypatch):
+    """package:// against package_paths=, ROS_PACKAGE_PATH and the file's parents; relative paths
+    against the file's directory."""
+    robot = tmp_path / "share" / "my_robot" / "urdf" / "r.urdf"
+    mesh = tmp_path / "share" / "my_robot" / "meshes" / "a.stl"
+    mesh.parent.mkdir(parents=True)
+    robot.parent.mkdir(parents=True)
+    _binary_stl(mesh)
+    assert resolve_mesh("package://my_robot/meshes/a.stl", robot) == mesh  # a parent is named my_robot
+    assert resolve_mesh("../meshes/a.stl", robot).resolve() == mesh
+    elsewhere = tmp_path / "elsewhere" / "r.urdf"
+    assert resolve_mesh("package://my_robot/meshes/a.stl", elsewhere) is None
+    assert resolve_mesh("package://my_robot/meshes/a.stl", elsewhere, [tmp_path / "share"]) == mesh
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "share"))
+    assert resolve_mesh("package://my_robot/meshes/a.stl", elsewhere) == mesh
+
+
+BOXED = """<robot name="boxed">
+  <link name="base"><visual><geometry><box size="0.2 0.2 0.1"/></geometry></visual></link>
+  <link name="arm"><inertial><origin xyz="0.25 0 0"/><mass value="1"/>
+      <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.02"/></inertial>
+    <visual><origin xyz="0.25 0 0" rpy="0 1.5707963267948966 0"/>
+      <geometry><cylinder radius="0.03" length="0.5"/></geometry></visual>
+    <visual><geometry><mesh filename="package://my_robot/meshes/a.stl" scale="0.1 0.1 0.1"/></geometry></visual>
+    <visual><geometry><mesh filename="package://nowhere/b.stl"/></geometry></visual></link>
+  <joint name="hinge" type="continuous"><parent link="base"/><child link="arm"/><axis xyz="0 1 0"/></joint>
+</robot>"""
+
+
+def test_visuals_meshes_and_missing_mesh(tmp_path):
+    """A mesh found by package_paths= becomes a box of its scaled bounds; a missing one is a warning
+    (the file still loads) and stays a named placeholder."""
+    mesh = tmp_path / "share" / "my_robot" / "meshes" / "a.stl"
+    mesh.parent.mkdir(parents=True)
+    _binary_stl(mesh)
+    path = tmp_path / "boxed.urdf"
+    path.write_text(BOXED)
+    with pytest.warns(RobotFileWarning, match=r"boxed\.urdf: meshes drawn as placeholders: package://nowhere/b\.stl "
+                                              r"\(not found\)"):
+        system = kronlag.load_urdf(path, package_paths=[tmp_path / "share"])
+    shapes = [(v.link, v.shape, v.size, v.filename) for v in system.robot.visuals]
+    assert shapes[:2] == [("base", "box", (0.2, 0.2, 0.1), None), ("arm", "cylinder", (0.03, 0.5), None)]
+    assert shapes[2][:2] == ("arm", "box") and np.allclose(shapes[2][2], [0.1, 0.25, 0.4])
+    assert np.allclose(system.robot.visuals[2].pose[:3, 3], [0.05, 0.075, 0.1])  # the box's centre
+    assert shapes[3] == ("arm", "mesh", (1.0, 1.0, 1.0), "package://nowhere/b.stl")
+
+
+@pytest.mark.slow
+def test_animation_draws_the_visuals(tmp_path):
+    """The frame of a robot with visuals has the solids' fill colours; the same robot without
+    visuals has only the stick figure."""
+    from kronlag.views.animation import render_frame
+
+    counts = []
+    for text in (BOXED, re.sub(r"<visual>.*?</visual>", "", BOXED, flags=re.S)):
+        path = tmp_path / "boxed.urdf"
+        path.write_text(text)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RobotFileWarning)
+            system = kronlag.load_urdf(path)
+        model = kronlag.derive(system).numeric(system.robot.values, backend="python")
+        trajectory = kronlag.simulate(model, (0, 0.2), [0.3], [0.0], t_eval=np.linspace(0, 0.2, 3))
+        image = render_frame(trajectory, -1, tmp_path / "frame.png").convert("RGB")
+        colors = np.array(image).reshape(-1, 3)
+        pale_blue = np.array([143, 187, 217])  # the first solid's fill: tab:blue mixed with white
+        counts.append(int((np.abs(colors - pale_blue).sum(axis=1) == 0).sum()))
+    assert counts[0] > 500 and counts[1] == 0
