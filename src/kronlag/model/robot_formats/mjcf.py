@@ -42,12 +42,16 @@ from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build
 
 __all__ = ["load_mjcf", "add_rows"]
 
+#: MJCF's joint types (the reader turns hinge and slide joints into coordinates).
+_JOINT_TYPES = ("hinge", "slide", "ball", "free")
 #: Elements of a body the reader uses (the others are listed as skipped).
 _BODY_USED = {"body", "inertial", "joint", "geom"}
 #: Top-level elements the reader uses.
 _TOP_USED = {"compiler", "option", "default", "worldbody", "equality"}
 #: A constraint row whose value is below this at every coordinate value is identically zero.
 _ZERO_ROW = 1e-12
+#: A loop is closed when every constraint row is below this; Gauss-Newton steps tried to close it.
+_CLOSED, _CLOSING_STEPS = 1e-9, 30
 
 
 def _quaternion_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
@@ -301,6 +305,9 @@ def load_mjcf(path: str | Path, *, coordinates: str = "joint", package_paths: Se
         for index, joint in enumerate(joints):
             attributes = reader.attributes(joint, childclass)
             kind = "free" if joint.tag == "freejoint" else attributes.get("type", "hinge")
+            if kind not in _JOINT_TYPES:
+                raise document.error(joint, f"unknown joint type {kind!r}; MJCF joint types are "
+                                            f"{', '.join(_JOINT_TYPES)}")
             if kind not in ("hinge", "slide"):
                 raise document.error(joint, f"type {kind!r}: only hinge and slide joints are supported yet")
             if float(attributes.get("ref", "0")) != 0:
@@ -399,6 +406,38 @@ def add_rows(document: XmlDocument, system: System, element: Element, name: str,
             robot_of(system).redundant.append(row)
         else:
             system.add_constraint(expression, name=row)
+    _check_closure(document, system, element, at)
+
+
+def _check_closure(document: XmlDocument, system: System, element: Element, at: np.ndarray) -> None:
+    """Refuse a loop that cannot be closed near the reference pose ``at``: unless every constraint
+    row vanishes there, Gauss-Newton steps (finite-difference Jacobian) from ``at`` must close them
+    all; the error gives the residual before and after."""
+    symbols = list(system.coordinates)
+    expressions = [constraint.expression for constraint in system.constraints]
+    if not expressions or set().union(*(e.free_symbols for e in expressions)) - set(symbols):
+        return
+    evaluate = sp.lambdify(symbols, expressions, "numpy")
+
+    def residual(q: np.ndarray) -> np.ndarray:
+        return np.array(evaluate(*q), dtype=float).ravel()
+
+    q, values = at.astype(float), residual(at.astype(float))
+    start = float(np.abs(values).max())
+    if start <= _CLOSED:
+        return
+    step = 1e-7
+    for _ in range(_CLOSING_STEPS):
+        jacobian = np.column_stack([(residual(q + step * unit) - residual(q - step * unit)) / (2 * step)
+                                    for unit in np.eye(len(q))])
+        q = q - np.linalg.lstsq(jacobian, values, rcond=None)[0]
+        values = residual(q)
+        if np.abs(values).max() <= _CLOSED:
+            return
+    worst = system.constraints[int(np.argmax(np.abs(values)))].name
+    raise document.error(element, f"the loop cannot be closed near the reference pose: constraint residual "
+                                  f"{start:.3g} there, {float(np.abs(values).max()):.3g} (row {worst}) after "
+                                  f"{_CLOSING_STEPS} Gauss-Newton steps")
 
 
 def _add_equality(document: XmlDocument, system: System, element: Element, index: int,
