@@ -267,3 +267,17 @@ def test_animation_draws_the_visuals(tmp_path):
         pale_blue = np.array([143, 187, 217])  # the first solid's fill: tab:blue mixed with white
         counts.append(int((np.abs(colors - pale_blue).sum(axis=1) == 0).sum()))
     assert counts[0] > 500 and counts[1] == 0
+
+
+def test_mjcf_mesh_asset_is_drawn_by_its_bounds(tmp_path):
+    (tmp_path / "parts").mkdir()
+    _binary_stl(tmp_path / "parts" / "link.stl")
+    path = tmp_path / "meshy.xml"
+    path.write_text('<mujoco><compiler meshdir="parts"/><asset><mesh file="link.stl" scale="2 2 2"/><texture/></asset>'
+                    '<worldbody><body name="a"><joint name="j" axis="0 1 0"/>'
+                    '<inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/><geom type="mesh" mesh="link"/></body>'
+                    '</worldbody></mujoco>')
+    with pytest.warns(RobotFileWarning, match="asset/texture"):
+        system = kronlag.load_mjcf(path)
+    (visual,) = system.robot.visuals
+    assert visual.shape == "box" and np.allclose(visual.size, [2, 5, 8]) and np.allclose(visual.pose[:3, 3], [1, 1.5, 2])

@@ -47,7 +47,7 @@ _JOINT_TYPES = ("hinge", "slide", "ball", "free")
 #: Elements of a body the reader uses (the others are listed as skipped).
 _BODY_USED = {"body", "inertial", "joint", "geom"}
 #: Top-level elements the reader uses.
-_TOP_USED = {"compiler", "option", "default", "worldbody", "equality"}
+_TOP_USED = {"compiler", "option", "default", "worldbody", "equality", "asset"}
 #: A constraint row whose value is below this at every coordinate value is identically zero.
 _ZERO_ROW = 1e-12
 #: A loop is closed when every constraint row is below this; Gauss-Newton steps tried to close it.
@@ -279,6 +279,7 @@ def load_mjcf(path: str | Path, *, coordinates: str = "joint", package_paths: Se
         if child.tag not in _TOP_USED:
             document.skip(child, "mujoco")
     reader = _Reader(document)
+    meshes = _mesh_assets(document)
     option = root.find("option")
     gravity = (0.0, 0.0, -9.81) if option is None else three(document.numbers(option, "gravity", 3,
                                                                               default=(0, 0, -9.81)))
@@ -355,7 +356,8 @@ def load_mjcf(path: str | Path, *, coordinates: str = "joint", package_paths: Se
         if shape in full and len(size) >= {"box": 3, "sphere": 1}.get(shape, 2):
             visuals.append((link, shape, full[shape](), pose, None))
         elif shape == "mesh":
-            visuals.append((link, "mesh", (1.0, 1.0, 1.0), pose, attributes.get("mesh")))
+            file, scale = meshes.get(attributes.get("mesh", ""), (attributes.get("mesh"), (1.0, 1.0, 1.0)))
+            visuals.append((link, "mesh", scale, pose, file))
 
     for child in worldbody:
         if child.tag == "body":
@@ -372,6 +374,24 @@ def load_mjcf(path: str | Path, *, coordinates: str = "joint", package_paths: Se
         _add_equality(document, system, element, index, shifts)
     report_skipped(document, system)
     return system
+
+
+def _mesh_assets(document: XmlDocument) -> dict[str, tuple[str, tuple[float, ...]]]:
+    """``<asset><mesh>`` by name (default: the file's stem): its file (in ``<compiler meshdir>`` or
+    ``assetdir``, relative to the model file) and scale; the other assets are skipped."""
+    compiler = document.root.find("compiler")
+    folder = "" if compiler is None else compiler.get("meshdir", compiler.get("assetdir", ""))
+    meshes = {}
+    for asset in document.root.findall("asset"):
+        for child in asset:
+            if child.tag != "mesh" or child.get("file") is None:
+                document.skip(child, "asset")
+                continue
+            file = child.get("file", "")
+            name = child.get("name") or Path(file).stem
+            path = file if Path(file).is_absolute() or not folder else str(Path(folder) / file)
+            meshes[name] = (path, document.numbers(child, "scale", 3, default=(1, 1, 1)))
+    return meshes
 
 
 def _frame_of(document: XmlDocument, system: System, element: Element, key: str) -> tuple[str, sp.Matrix, sp.Matrix]:
