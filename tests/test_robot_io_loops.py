@@ -6,8 +6,8 @@ angle; the platform position), the other bodies placed by closed-form position a
 intersection; the delta's inverse kinematics) and Kane's equations evaluated with SymPy
 derivatives of those closed forms - and with the same mechanisms built otherwise (the four-bar with
 planar bodies in tests/test_robot_formats.py; both in absolute body coordinates).  MuJoCo's soft
-closure is measured against the same reference: it is off by percents (the numbers are printed
-and kept in the assertions' bounds).
+closure is measured against the same reference (printed with ``-s``): 4.5 % off the four-bar's
+crank acceleration, 0.6 % off the delta's platform accelerations (of the largest component).
 """
 
 from __future__ import annotations
@@ -196,7 +196,7 @@ def test_four_bar_is_exact(coordinates):
             worst_mujoco = max(worst_mujoco, abs(theirs[0] - expected) / abs(expected))
     if coordinates == "joint":
         print(f"four-bar: MuJoCo's soft closure is off the exact crank acceleration by up to {worst_mujoco:.1%}")
-        assert worst_mujoco > 0.01  # soft: percents off (measured 4-8 %)
+        assert worst_mujoco > 0.01  # soft: measured 4.5 %
 
 
 def _absolute_state(absolute, joint, q, qd):
@@ -221,7 +221,7 @@ def _absolute_state(absolute, joint, q, qd):
 @pytest.mark.slow
 def test_delta_is_exact():
     """The delta: 12 coordinates, three connects of 3 rows, mobility 3; the platform's accelerations
-    agree with the reduced reference to 1e-9 at random states, MuJoCo's are percents off."""
+    agree with the reduced reference to 1e-9 at random states; MuJoCo's are 0.6 % off."""
     system = _load("delta.xml")
     assert [c.name for c in system.constraints] == [f"leg{i}.{a}" for i in (1, 2, 3) for a in "xyz"]
     model = kronlag.derive(system).numeric(system.robot.values, backend="python")
@@ -240,4 +240,4 @@ def test_delta_is_exact():
         theirs = _mujoco_accelerations("delta.xml", names, q, qd)[[names.index(n) for n in ("px", "py", "pz")]]
         worst_mujoco = max(worst_mujoco, np.abs(theirs - expected).max() / np.abs(expected).max())
     print(f"delta: MuJoCo's soft closure is off the exact platform accelerations by up to {worst_mujoco:.1%}")
-    assert worst_mujoco > 0.01
+    assert worst_mujoco > 1e-3  # soft: measured 0.6 % of the largest platform acceleration
