@@ -124,7 +124,6 @@ def test_absolute_coordinates_give_the_same_motion(tmp_path):
     joint_model = kronlag.derive(joint).numeric({**joint.robot.values, **tau}, backend="python")
     absolute_model = kronlag.derive(absolute).numeric({**absolute.robot.values, **tau}, backend="python")
     qs = joint.coordinates
-    qds = sp.symbols("v0:3")
     X = absolute.coordinates
     values = [absolute.robot.joint_values[name] for name in ("shoulder", "elbow", "slide")]
     gradient = sp.lambdify(X, sp.Matrix(values).jacobian(X))
@@ -161,8 +160,7 @@ TRIANGLES = np.array([[[0, 0, 0], [1, 0, 0], [0, 2, 0]], [[0, 0, -1], [1, 2, 3],
 def _binary_stl(path):
     with open(path, "wb") as file:
         file.write(b"\0" * 80 + struct.pack("<I", len(TRIANGLES)))
-        for triangle in TRIANGLES:
-            file.write(struct.pack("<3f", 0, 0, 1) + struct.pack("<9f", *triangle.ravel()) + b"\0\0")
+        file.writelines(struct.pack("<3f", 0, 0, 1) + struct.pack("<9f", *triangle.ravel()) + b"\0\0" for triangle in TRIANGLES)
 
 
 def _ascii_stl(path):
@@ -254,7 +252,7 @@ def test_animation_draws_the_visuals(tmp_path):
     from kronlag.views.animation import render_frame
 
     counts = []
-    for text in (BOXED, re.sub(r"<visual>.*?</visual>", "", BOXED, flags=re.S)):
+    for text in (BOXED, re.sub(r"<visual>.*?</visual>", "", BOXED, flags=re.DOTALL)):
         path = tmp_path / "boxed.urdf"
         path.write_text(text)
         with warnings.catch_warnings():

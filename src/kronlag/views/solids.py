@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from ..model.robot_formats.description import Visual
     from ..model.system import System
 
-__all__ = ["solid_points", "body_frames", "hull", "place"]
+__all__ = ["body_frames", "hull", "place", "solid_points"]
 
 #: Points around a circle of a cylinder's or capsule's cross-section (and per ring of a sphere).
 _AROUND = 16

@@ -28,7 +28,11 @@ import sympy as sp
 
 from ..bodies import RigidBody
 from ..frames import GROUND, Frame
-from ..rotations import euler_parameter_constraint, euler_parameters, euler_parameters_of
+from ..rotations import (
+    euler_parameter_constraint,
+    euler_parameters,
+    euler_parameters_of,
+)
 from ..system import System
 from .description import RobotDescription, RobotJoint, coordinate_name
 from .safe_xml import XmlDocument
@@ -88,6 +92,7 @@ def absolute_system(document: XmlDocument, joint_system: System) -> System:
     link_frames: dict[str, Frame] = {GROUND: Frame((0, 0, 0), sp.eye(3))}
     start: dict[str, float] = {}
     for body in joint_system.bodies:
+        assert isinstance(body, RigidBody)  # build_system adds rigid bodies only
         label = coordinate_name(body.name, taken)
         names = [f"{axis}_{label}" for axis in "xyz"] + [f"e{k}_{label}" for k in range(4)]
         symbols = sp.symbols(" ".join(names))

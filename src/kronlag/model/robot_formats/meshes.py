@@ -32,7 +32,7 @@ from ...core.errors import ModelFileError
 from ...core.limits import MAX_MODEL_FILE_BYTES
 from .description import RobotFileWarning, Visual
 
-__all__ = ["MESH_SUFFIXES", "search_roots", "resolve_mesh", "mesh_bounds", "with_mesh_bounds"]
+__all__ = ["MESH_SUFFIXES", "mesh_bounds", "resolve_mesh", "search_roots", "with_mesh_bounds"]
 
 #: The mesh formats whose vertices are read (others are drawn as a placeholder).
 MESH_SUFFIXES = (".stl", ".obj", ".dae")
