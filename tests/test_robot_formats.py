@@ -285,8 +285,8 @@ def mjcf_error(path) -> str:
 
 @pytest.mark.parametrize("body, equality, expected", [
     (PENDULUM.replace('axis="0 1 0"', 'type="ball"'), "", r"<joint name='hinge'>: type 'ball': only hinge and slide"),
-    (PENDULUM.replace('<inertial pos="0.5 0 0" mass="1" diaginertia="0.001 0.02 0.02"/>', '<geom size="0.1"/>'), "",
-     r"<body name='arm'>: has geoms but no <inertial>"),
+    (PENDULUM.replace('<inertial pos="0.5 0 0" mass="1" diaginertia="0.001 0.02 0.02"/>', '<geom type="mesh"/>'), "",
+     r"<geom>: type 'mesh': kronlag computes inertia from sphere"),
     (PENDULUM.replace('mass="1"', 'mass="-1"'), "", r"<body name='arm'>: <inertial>: mass = -1 .*must not be negative"),
     (PENDULUM, '<connect body1="arm" body2="nope" anchor="0 0 0"/>', r"<connect>: body2='nope' is not a body"),
     (PENDULUM, '<joint joint1="hinge" joint2="nope"/>', r"<joint>: names the joint 'nope'"),

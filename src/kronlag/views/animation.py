@@ -38,6 +38,7 @@ import sympy as sp
 
 from ..core.errors import InputError
 from ..core.kernels import ExpressionFunction
+from .solids import body_frames, hull, place
 
 if TYPE_CHECKING:
     from PIL.Image import Image
@@ -73,6 +74,7 @@ class _Drawing:
     lines: dict[str, np.ndarray]  # name -> (T, vertices, dim)
     traces: dict[str, np.ndarray]  # name -> (T, dim)
     fixed_points: np.ndarray  # (K, dim): vertices that do not move
+    solids: dict[str, np.ndarray]  # a robot file's visuals: name -> (T, points, 3) (kronlag.views.solids)
 
     @property
     def dimension(self) -> int:
@@ -81,7 +83,8 @@ class _Drawing:
     def all_points(self) -> np.ndarray:
         """Every drawn point at every time, shape (P, dim)."""
         blocks = [points.reshape(-1, self.dimension) for points in self.lines.values()]
-        return np.concatenate(blocks + list(self.traces.values()) + [self.fixed_points])
+        solids = [points.reshape(-1, self.dimension) for points in self.solids.values()]
+        return np.concatenate(blocks + solids + list(self.traces.values()) + [self.fixed_points])
 
 
 def _model_parameters(model: NumericModel, times: np.ndarray) -> dict[str, float | np.ndarray]:
@@ -116,7 +119,9 @@ def _evaluate_drawing(traj: Trajectory, frame_times: np.ndarray, parameters: Par
     points = [point for line in system.drawing for point in line.points] + [trace.points[0]
                                                                              for trace in system.traces]
     dimension = points[0].rows
-    entries = [entry for point in points for entry in point]
+    frames_of_solids = body_frames(system) if dimension == 3 else {}
+    entries = [entry for point in points for entry in point] + [entry for frame in frames_of_solids.values()
+                                                                 for entry in frame]
     used = set().union(*(entry.free_symbols for entry in entries))
     symbols = [parameter for parameter in system.parameters if parameter in used]
     function = ExpressionFunction({"points": sp.Matrix(entries)}, [("q", system.coordinates), ("p", symbols)],
@@ -127,7 +132,11 @@ def _evaluate_drawing(traj: Trajectory, frame_times: np.ndarray, parameters: Par
                                       _parameter_values(traj, symbols, parameters, times)] or
                                      [np.zeros((len(times), 0))])
     values = function.batch(_resample(traj, times), parameter_rows)["points"]
-    values = values.reshape(len(times), len(points), dimension)
+    values = values.reshape(len(times), -1)
+    solid_values = values[:, len(points) * dimension:]
+    values = values[:, :len(points) * dimension].reshape(len(times), len(points), dimension)
+    solids = place(system, {body: solid_values[:, 12 * k:12 * k + 12]
+                            for k, body in enumerate(frames_of_solids)}) if frames_of_solids else {}
 
     lines, start = {}, 0
     for line in system.drawing:
@@ -138,7 +147,7 @@ def _evaluate_drawing(traj: Trajectory, frame_times: np.ndarray, parameters: Par
     fixed = [values[0, k] for k, point in enumerate(points[:start]) if not point.free_symbols & coordinates]
     fixed_points = np.unique(np.array(fixed).reshape(-1, dimension), axis=0)
     frames = np.arange(len(frame_times)) * _PATH_SUBSTEPS
-    return _Drawing(system.name, times, frames, lines, traces, fixed_points)
+    return _Drawing(system.name, times, frames, lines, traces, fixed_points, solids)
 
 
 def _resample(traj: Trajectory, times: np.ndarray) -> np.ndarray:
@@ -227,7 +236,8 @@ class _Picture:
         traces = {name: project(path) for name, path in drawing.traces.items()} if trace else {}
         fixed = project(drawing.fixed_points)
         axes = self._axis_segments(drawing)
-        everything = np.concatenate([points.reshape(-1, 2) for points in lines.values()]
+        solids = {name: project(points) for name, points in drawing.solids.items()}
+        everything = np.concatenate([points.reshape(-1, 2) for points in [*lines.values(), *solids.values()]]
                                     + list(traces.values()) + [fixed, project(axes).reshape(-1, 2)])
         low, high = everything.min(axis=0), everything.max(axis=0)
         size = (high - low).max() or 1.0
@@ -245,6 +255,10 @@ class _Picture:
         self.lines = {name: self._pixels(points) for name, points in lines.items()}
         self.traces = {name: self._pixels(path) for name, path in traces.items()}
         self.fixed = self._pixels(fixed)
+        self.solids = {name: self._pixels(points) for name, points in solids.items()}
+        # far to near: the depth of a solid is its mean along the view direction (towards the viewer)
+        toward = np.cross(*_screen_axes()) if drawing.dimension == 3 else np.zeros(2)
+        self.depths = {name: (points @ toward).mean(axis=1) for name, points in drawing.solids.items()}
         self.axes = self._pixels(project(axes))
         self.line_width = max(2, round(width / 160))
 
@@ -270,7 +284,7 @@ class _Picture:
         from PIL import Image, ImageDraw, ImageFont
 
         colors = [_WHITE, _BLACK, _GROUND, _AXES, *(color for _, color in self.legend),
-                  *(_pale(color) for _, color in self.legend)]
+                  *(_pale(color) for _, color in self.legend), *_COLORS, *map(_pale, _COLORS)]
         index = {color: k for k, color in reversed(list(enumerate(colors)))}
         palette = [int(color[k:k + 2], 16) for color in colors for k in (1, 3, 5)]
         font = ImageFont.load_default(size=14)
@@ -302,6 +316,7 @@ class _Picture:
             image = background.copy()
             draw = ImageDraw.Draw(image)
             draw.text((8, 6), self.title(frame), fill=index[_BLACK], font=font)
+            self._draw_solids(draw, index, time_index)
             for name, points in self.lines.items():
                 vertices = [tuple(point) for point in points[time_index]]
                 draw.line(vertices, fill=index[colors_of[name]], width=width, joint="curve")
@@ -312,6 +327,15 @@ class _Picture:
                 x, y = path[time_index]
                 draw.ellipse([x - radius, y - radius, x + radius, y + radius], fill=index[colors_of[name]])
             yield image
+
+    def _draw_solids(self, draw, index: dict[str, int], time_index: int) -> None:
+        """The robot's visuals at one time: convex silhouettes, far to near, one colour per solid."""
+        names = list(self.solids)
+        for k in sorted(range(len(names)), key=lambda k: self.depths[names[k]][time_index]):
+            color = _COLORS[k % len(_COLORS)]
+            outline = hull(self.solids[names[k]][time_index])
+            if len(outline) >= 3:
+                draw.polygon([tuple(point) for point in outline], fill=index[_pale(color)], outline=index[color])
 
     def html(self, *, fps: float, speed: float) -> str:
         """A page whose script draws the frames on a canvas, in a loop from when it is loaded

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -111,6 +112,10 @@ class RobotDescription:
     redundant : list of str
         Constraint rows of the file dropped as identically zero (a planar MJCF ``connect``'s
         out-of-plane row).
+    joint_values : dict of str to sympy.Expr
+        Each moving joint's value (angle or slide) as an expression of the coordinates: its
+        coordinate in joint coordinates; in absolute body coordinates (:mod:`.absolute`) the angle
+        or slide between its bodies.
     """
 
     source: str
@@ -124,6 +129,7 @@ class RobotDescription:
     q_reference: dict[str, float] = field(default_factory=dict)
     skipped: str = ""
     redundant: list[str] = field(default_factory=list)
+    joint_values: dict[str, Any] = field(default_factory=dict)
 
     def joint(self, name: str) -> RobotJoint:
         """The joint called ``name``."""

@@ -27,6 +27,7 @@ refused (not supported yet), as is a ``ref`` other than 0.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from xml.etree.ElementTree import Element
 
@@ -36,17 +37,21 @@ import sympy as sp
 from ..system import System
 from .description import JointLimits
 from .safe_xml import XmlDocument, numbers, read_xml
-from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build_system, check_inertia,
+from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build_system, check_inertia, combine,
                    orientation_rows, report_skipped, robot_of, rpy_of, three)
 
 __all__ = ["load_mjcf", "add_rows"]
 
+#: MJCF's joint types (the reader turns hinge and slide joints into coordinates).
+_JOINT_TYPES = ("hinge", "slide", "ball", "free")
 #: Elements of a body the reader uses (the others are listed as skipped).
 _BODY_USED = {"body", "inertial", "joint", "geom"}
 #: Top-level elements the reader uses.
-_TOP_USED = {"compiler", "option", "default", "worldbody", "equality"}
+_TOP_USED = {"compiler", "option", "default", "worldbody", "equality", "asset"}
 #: A constraint row whose value is below this at every coordinate value is identically zero.
 _ZERO_ROW = 1e-12
+#: A loop is closed when every constraint row is below this; Gauss-Newton steps tried to close it.
+_CLOSED, _CLOSING_STEPS = 1e-9, 30
 
 
 def _quaternion_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
@@ -75,6 +80,10 @@ class _Reader:
         if len(self.eulerseq) != 3 or any(c not in "xyzXYZ" for c in self.eulerseq):
             assert compiler is not None  # the default eulerseq is valid
             raise document.error(compiler, f"eulerseq={self.eulerseq!r}: expected three of x, y, z, X, Y, Z")
+        self.from_geoms = "auto" if compiler is None else compiler.get("inertiafromgeom", "auto")
+        if self.from_geoms not in ("auto", "true", "false"):
+            assert compiler is not None
+            raise document.error(compiler, f"inertiafromgeom={self.from_geoms!r}: expected auto, true or false")
         self.defaults: dict[str, dict[str, dict[str, str]]] = {}
         for default in root.findall("default"):
             self._read_default(default, {}, "main")
@@ -144,13 +153,58 @@ class _Reader:
     def pose(self, element: Element, values: dict) -> tuple[np.ndarray, np.ndarray]:
         return np.array(self.numbers(element, values, "pos", 3, default=(0, 0, 0))), self.orientation(element, values)
 
-    def inertial(self, body: Element, shift: np.ndarray) -> Inertial:
-        """The body's inertial in its link frame, whose origin is ``shift`` in the body frame."""
+    def geom_frame(self, geom: Element, values: dict) -> tuple[str, tuple[float, ...], np.ndarray, np.ndarray]:
+        """``(type, size, position, rotation)`` of a geom in its body's frame; ``fromto`` (capsule,
+        cylinder, box, ellipsoid) gives the position (the middle), the z axis and the half length."""
+        shape = values.get("type", "sphere")
+        size = self.numbers(geom, values, "size", len((values.get("size") or "0").split()), default=(0.0,))
+        if "fromto" in values and shape in ("capsule", "cylinder", "box", "ellipsoid"):
+            ends = np.array(self.numbers(geom, values, "fromto", 6)).reshape(2, 3)
+            axis = ends[1] - ends[0]
+            half = float(np.linalg.norm(axis)) / 2
+            if half == 0:
+                raise self.document.error(geom, "fromto: the two ends coincide")
+            turn = np.cross([0.0, 0.0, 1.0], axis / (2 * half))
+            angle = math.atan2(float(np.linalg.norm(turn)), float(axis[2] / (2 * half)))
+            rotation = _axis_angle_matrix(turn, angle) if np.linalg.norm(turn) > 1e-15 else (
+                np.eye(3) if axis[2] > 0 else np.diag([1.0, -1.0, -1.0]))
+            size = (size[0], half) if shape in ("capsule", "cylinder") else (size[0], size[1], half)
+            return shape, size, ends.mean(axis=0), rotation
+        position, rotation = self.pose(geom, values)
+        return shape, size, position, rotation
+
+    def geom_inertial(self, geom: Element, values: dict) -> Inertial | None:
+        """A geom's inertial in its body's frame by MuJoCo's rules (uniform density, default 1000, or
+        the geom's ``mass``); ``None`` for a geom without volume (a plane)."""
+        shape, size, position, rotation = self.geom_frame(geom, values)
+        if shape == "plane":
+            return None
+        needed = _GEOM_SIZES.get(shape)
+        if needed is None:
+            raise self.document.error(geom, f"type {shape!r}: kronlag computes inertia from sphere, capsule, "
+                                            "cylinder, box and ellipsoid geoms; give the body an <inertial>")
+        if len(size) < needed or any(x <= 0 for x in size[:needed]):
+            raise self.document.error(geom, f"size={values.get('size')!r}: a {shape} needs {needed} positive sizes")
+        volume, unit = _geom_volume_inertia(shape, size[:needed])
+        mass = (self.numbers(geom, values, "mass", 1)[0] if "mass" in values
+                else self.numbers(geom, values, "density", 1, default=(1000.0,))[0] * volume)
+        if mass < 0:
+            raise self.document.error(geom, f"mass {mass:g}: a mass must not be negative")
+        return Inertial(mass, position, rotation @ np.diag(mass * unit) @ rotation.T)
+
+    def inertial(self, body: Element, shift: np.ndarray, childclass: str) -> Inertial:
+        """The body's inertial in its link frame, whose origin is ``shift`` in the body frame: its
+        ``<inertial>``, else (``<compiler inertiafromgeom>`` ``auto``, the default, or ``true``)
+        from its geoms; no mass without either."""
         inertial = body.find("inertial")
+        geoms = body.findall("geom")
+        if self.from_geoms == "true" or (inertial is None and self.from_geoms == "auto" and geoms):
+            parts = [part for geom in geoms
+                     if (part := self.geom_inertial(geom, self.attributes(geom, childclass))) is not None]
+            combined = combine(parts) if parts else NO_MASS
+            check_inertia(self.document, body, combined.mass, combined.tensor)
+            return Inertial(combined.mass, combined.centre - shift, combined.tensor)
         if inertial is None:
-            if any(geom.get("type", "sphere") != "plane" for geom in body.findall("geom")):
-                raise self.document.error(body, "has geoms but no <inertial>: kronlag does not compute inertia "
-                                                "from geoms; give <inertial pos=... mass=... diaginertia=...>")
             return NO_MASS
         values = inertial.attrib
         mass = self.document.number(inertial, "mass")
@@ -164,12 +218,47 @@ class _Reader:
         return Inertial(mass, position - shift, rotation @ tensor @ rotation.T)
 
 
+#: The number of sizes each geom type's volume needs (MJCF sizes are radii and half lengths).
+_GEOM_SIZES = {"sphere": 1, "capsule": 2, "cylinder": 2, "box": 3, "ellipsoid": 3}
+
+
+def _geom_volume_inertia(shape: str, size: tuple[float, ...]) -> tuple[float, np.ndarray]:
+    """A geom's volume and its central principal moments per unit mass (MuJoCo's formulas; a capsule
+    is a cylinder and two hemispheres, as MuJoCo's compiler sums them)."""
+    if shape == "sphere":
+        (r,) = size
+        return 4 / 3 * math.pi * r ** 3, np.full(3, 2 / 5 * r * r)
+    if shape == "box":
+        a, b, c = size
+        return 8 * a * b * c, np.array([b * b + c * c, a * a + c * c, a * a + b * b]) / 3
+    if shape == "ellipsoid":
+        a, b, c = size
+        return 4 / 3 * math.pi * a * b * c, np.array([b * b + c * c, a * a + c * c, a * a + b * b]) / 5
+    r, half = size
+    h = 2 * half
+    cylinder = math.pi * r * r * h
+    if shape == "cylinder":
+        return cylinder, np.array([(3 * r * r + h * h) / 12, (3 * r * r + h * h) / 12, r * r / 2])
+    sphere = 4 / 3 * math.pi * r ** 3
+    volume = cylinder + sphere
+    side = (cylinder * (3 * r * r + h * h) / 12 + 2 / 5 * sphere * r * r + sphere * h * (3 * r + 2 * h) / 8)
+    return volume, np.array([side, side, cylinder * r * r / 2 + 2 / 5 * sphere * r * r]) / volume
+
+
 def _origin(position: np.ndarray, rotation: np.ndarray) -> tuple[float, ...]:
     return (*map(float, position), *rpy_of(rotation))
 
 
-def load_mjcf(path: str | Path) -> System:
+def load_mjcf(path: str | Path, *, coordinates: str = "joint", package_paths: Sequence[str | Path] = ()) -> System:
     """Read an MJCF (MuJoCo XML) file into a :class:`~kronlag.System` (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+    coordinates : {"joint", "absolute"}
+        Joint coordinates (default) or absolute body coordinates (:mod:`.absolute`).
+    package_paths : sequence of paths
+        Folders searched first for mesh files (:mod:`.meshes`).
 
     Returns
     -------
@@ -190,6 +279,7 @@ def load_mjcf(path: str | Path) -> System:
         if child.tag not in _TOP_USED:
             document.skip(child, "mujoco")
     reader = _Reader(document)
+    meshes = _mesh_assets(document)
     option = root.find("option")
     gravity = (0.0, 0.0, -9.81) if option is None else three(document.numbers(option, "gravity", 3,
                                                                               default=(0, 0, -9.81)))
@@ -216,6 +306,9 @@ def load_mjcf(path: str | Path) -> System:
         for index, joint in enumerate(joints):
             attributes = reader.attributes(joint, childclass)
             kind = "free" if joint.tag == "freejoint" else attributes.get("type", "hinge")
+            if kind not in _JOINT_TYPES:
+                raise document.error(joint, f"unknown joint type {kind!r}; MJCF joint types are "
+                                            f"{', '.join(_JOINT_TYPES)}")
             if kind not in ("hinge", "slide"):
                 raise document.error(joint, f"type {kind!r}: only hinge and slide joints are supported yet")
             if float(attributes.get("ref", "0")) != 0:
@@ -244,7 +337,7 @@ def load_mjcf(path: str | Path) -> System:
             specs.append(TreeJoint(body, f"{name}:weld", "fixed", parent, name, _origin(position, rotation),
                                    (1.0, 0.0, 0.0)))
         links[name], shifts[name] = body, anchor
-        inertials[name] = reader.inertial(body, anchor)
+        inertials[name] = reader.inertial(body, anchor, childclass)
         for geom in body.findall("geom"):
             read_geom(geom, name, childclass, anchor)
         for child in body:
@@ -255,9 +348,7 @@ def load_mjcf(path: str | Path) -> System:
 
     def read_geom(geom: Element, link: str, childclass: str, anchor: np.ndarray) -> None:
         attributes = reader.attributes(geom, childclass)
-        shape = attributes.get("type", "sphere")
-        size = numbers(attributes.get("size", "0")) or (0.0,)
-        position, rotation = reader.pose(geom, attributes)
+        shape, size, position, rotation = reader.geom_frame(geom, attributes)
         pose = np.eye(4)
         pose[:3, :3], pose[:3, 3] = rotation, position - anchor
         full = {"box": lambda: tuple(2 * x for x in size[:3]), "sphere": lambda: size[:1],  # MJCF: half sizes
@@ -265,7 +356,8 @@ def load_mjcf(path: str | Path) -> System:
         if shape in full and len(size) >= {"box": 3, "sphere": 1}.get(shape, 2):
             visuals.append((link, shape, full[shape](), pose, None))
         elif shape == "mesh":
-            visuals.append((link, "mesh", (1.0, 1.0, 1.0), pose, attributes.get("mesh")))
+            file, scale = meshes.get(attributes.get("mesh", ""), (attributes.get("mesh"), (1.0, 1.0, 1.0)))
+            visuals.append((link, "mesh", scale, pose, file))
 
     for child in worldbody:
         if child.tag == "body":
@@ -275,12 +367,31 @@ def load_mjcf(path: str | Path) -> System:
         else:
             document.skip(child, "worldbody")
     system = build_system(document, name=root.get("model") or Path(path).stem, file_format="mjcf", links=links,
-                          inertials=inertials, specs=specs, visuals=visuals, gravity=gravity)
+                          inertials=inertials, specs=specs, visuals=visuals, gravity=gravity,
+                          coordinates=coordinates, package_paths=package_paths)
     equality = root.find("equality")
     for index, element in enumerate(() if equality is None else list(equality)):
         _add_equality(document, system, element, index, shifts)
     report_skipped(document, system)
     return system
+
+
+def _mesh_assets(document: XmlDocument) -> dict[str, tuple[str, tuple[float, ...]]]:
+    """``<asset><mesh>`` by name (default: the file's stem): its file (in ``<compiler meshdir>`` or
+    ``assetdir``, relative to the model file) and scale; the other assets are skipped."""
+    compiler = document.root.find("compiler")
+    folder = "" if compiler is None else compiler.get("meshdir", compiler.get("assetdir", ""))
+    meshes = {}
+    for asset in document.root.findall("asset"):
+        for child in asset:
+            if child.tag != "mesh" or child.get("file") is None:
+                document.skip(child, "asset")
+                continue
+            file = child.get("file", "")
+            name = child.get("name") or Path(file).stem
+            path = file if Path(file).is_absolute() or not folder else str(Path(folder) / file)
+            meshes[name] = (path, document.numbers(child, "scale", 3, default=(1, 1, 1)))
+    return meshes
 
 
 def _frame_of(document: XmlDocument, system: System, element: Element, key: str) -> tuple[str, sp.Matrix, sp.Matrix]:
@@ -315,6 +426,38 @@ def add_rows(document: XmlDocument, system: System, element: Element, name: str,
             robot_of(system).redundant.append(row)
         else:
             system.add_constraint(expression, name=row)
+    _check_closure(document, system, element, at)
+
+
+def _check_closure(document: XmlDocument, system: System, element: Element, at: np.ndarray) -> None:
+    """Refuse a loop that cannot be closed near the reference pose ``at``: unless every constraint
+    row vanishes there, Gauss-Newton steps (finite-difference Jacobian) from ``at`` must close them
+    all; the error gives the residual before and after."""
+    symbols = list(system.coordinates)
+    expressions = [constraint.expression for constraint in system.constraints]
+    if not expressions or set().union(*(e.free_symbols for e in expressions)) - set(symbols):
+        return
+    evaluate = sp.lambdify(symbols, expressions, "numpy")
+
+    def residual(q: np.ndarray) -> np.ndarray:
+        return np.array(evaluate(*q), dtype=float).ravel()
+
+    q, values = at.astype(float), residual(at.astype(float))
+    start = float(np.abs(values).max())
+    if start <= _CLOSED:
+        return
+    step = 1e-7
+    for _ in range(_CLOSING_STEPS):
+        jacobian = np.column_stack([(residual(q + step * unit) - residual(q - step * unit)) / (2 * step)
+                                    for unit in np.eye(len(q))])
+        q = q - np.linalg.lstsq(jacobian, values, rcond=None)[0]
+        values = residual(q)
+        if np.abs(values).max() <= _CLOSED:
+            return
+    worst = system.constraints[int(np.argmax(np.abs(values)))].name
+    raise document.error(element, f"the loop cannot be closed near the reference pose: constraint residual "
+                                  f"{start:.3g} there, {float(np.abs(values).max()):.3g} (row {worst}) after "
+                                  f"{_CLOSING_STEPS} Gauss-Newton steps")
 
 
 def _add_equality(document: XmlDocument, system: System, element: Element, index: int,
@@ -324,7 +467,7 @@ def _add_equality(document: XmlDocument, system: System, element: Element, index
         return
     name = element.get("name") or f"{element.tag}{index}"
     if element.tag == "joint":
-        coordinates = {joint.name: sp.Symbol(joint.coordinate) for joint in robot_of(system).joints if joint.coordinate}
+        coordinates = robot_of(system).joint_values
         first = document.required(element, "joint1")
         second = element.get("joint2")
         for joint in (first, second):

@@ -20,6 +20,7 @@ is floating, which is not supported yet.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from xml.etree.ElementTree import Element
 
@@ -153,9 +154,10 @@ def _note_skipped(document: XmlDocument, element: Element) -> None:
             _note_skipped(document, child)
 
 
-def load_sdf(path: str | Path) -> System:
+def load_sdf(path: str | Path, *, coordinates: str = "joint",
+             package_paths: Sequence[str | Path] = ()) -> System:
     """Read an SDFormat file (its first ``<model>``) into a :class:`~kronlag.System` (see the module
-    docstring).
+    docstring); ``coordinates`` and ``package_paths`` as for :func:`~.urdf.load_urdf`.
 
     Raises
     ------
@@ -233,7 +235,8 @@ def load_sdf(path: str | Path) -> System:
     inertials = {"world": NO_MASS, **{link: _inertial(document, element, frames[link], poses.of(link, element))
                                       for link, element in links.items()}}
     system = build_system(document, name=model.get("name") or Path(path).stem, file_format="sdf",
-                          links={"world": model, **links}, inertials=inertials, specs=specs, visuals=visuals)
+                          links={"world": model, **links}, inertials=inertials, specs=specs, visuals=visuals,
+                          coordinates=coordinates, package_paths=package_paths)
     for name in loops:
         _close(document, system, joints[name], name, poses, frames)
     report_skipped(document, system)

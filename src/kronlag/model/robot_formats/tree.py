@@ -17,18 +17,21 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import SupportsFloat, cast
 from xml.etree.ElementTree import Element
 
 import numpy as np
 import sympy as sp
 
-from ...core.errors import ModelError
+from ...core.errors import InputError, ModelError
 from ..bodies import RigidBody
 from ..frames import GROUND, Frame
 from ..rotations import MAX_ROTATION_FACTORS, RotationSequence
 from ..system import System
+from .absolute import COORDINATE_CHOICES, absolute_system
 from .description import JointLimits, RobotDescription, RobotFileWarning, RobotJoint, Visual, coordinate_name
+from .meshes import with_mesh_bounds
 from .safe_xml import XmlDocument
 
 #: A visual as a reader gives it: ``(link, shape, size, pose in the link frame, filename)``.
@@ -250,11 +253,15 @@ def _tree(document: XmlDocument, links: dict[str, Element], joints: list[TreeJoi
 def build_system(document: XmlDocument, *, name: str, file_format: str, links: dict[str, Element],
                  inertials: dict[str, Inertial], specs: list[TreeJoint],
                  visuals: Sequence[VisualSpec],
-                 gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)) -> System:
+                 gravity: tuple[float, float, float] = (0.0, 0.0, -9.81), coordinates: str = "joint",
+                 package_paths: Sequence[str | Path] = ()) -> System:
     """The System of a kinematic tree in joint coordinates, with its :class:`RobotDescription`
     (``system.robot``); ``visuals`` are ``(link, shape, size, pose in the link frame, filename)``;
     ``gravity`` is the file's (the parameter ``g`` is its magnitude, its direction is kept).
     The reader reports the skipped elements (:func:`report_skipped`) once it is done.
+    ``coordinates="absolute"`` rewrites the system in absolute body coordinates
+    (:func:`~.absolute.absolute_system`); meshes are looked up in ``package_paths`` and the other
+    search paths of :mod:`.meshes` and drawn by their bounding boxes.
 
     Raises
     ------
@@ -262,6 +269,8 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
         Naming the element: an unknown link, a link with two parents, two roots, a mimic of an
         unknown joint, a zero-mass leaf.
     """
+    if coordinates not in COORDINATE_CHOICES:
+        raise InputError(f"coordinates={coordinates!r}: expected one of {', '.join(COORDINATE_CHOICES)}")
     root = _tree(document, links, specs)
     children: dict[str, list[TreeJoint]] = {link: [] for link in links}
     for spec in specs:
@@ -346,13 +355,14 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
                                 spec.mimic, torques[spec.name].name if spec.name in torques else None)
                      for spec in order),
         body_of_link={name: placement.body for name, placement in placements.items()},
-        visuals=tuple(Visual(link, placements[link].body, shape, size, placements[link].in_body @ pose, filename)
-                      for link, shape, size, pose, filename in visuals),
+        visuals=tuple(with_mesh_bounds((Visual(link, placements[link].body, shape, size, placements[link].in_body @ pose,
+                                               filename) for link, shape, size, pose, filename in visuals),
+                                       document.source, package_paths)),
         frames={link: Frame(placement.origin, placement.rotation) for link, placement in placements.items()},
         values={"g": magnitude, **{symbol.name: 0.0 for symbol in torques.values()}},
         q_reference={coordinate_of[spec.name].name: spec.mimic[2] if spec.mimic else 0.0 for spec in moving},
-        skipped=document.skipped_summary())
-    return system
+        skipped=document.skipped_summary(), joint_values=dict(coordinate_of))
+    return absolute_system(document, system) if coordinates == "absolute" else system
 
 
 def robot_of(system: System) -> RobotDescription:

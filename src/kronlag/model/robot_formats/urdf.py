@@ -17,6 +17,7 @@ one line naming the file, the line and the element.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from xml.etree.ElementTree import Element
 
@@ -146,13 +147,18 @@ def _joint(document: XmlDocument, element: Element) -> TreeJoint:
 
 
 
-def load_urdf(path: str | Path) -> System:
+def load_urdf(path: str | Path, *, coordinates: str = "joint",
+              package_paths: Sequence[str | Path] = ()) -> System:
     """Read a URDF file into a :class:`~kronlag.System` in joint coordinates (see the module docstring).
 
     Parameters
     ----------
     path : str or Path
         A ``.urdf`` file (xacro files are refused: run ``xacro`` first).
+    coordinates : {"joint", "absolute"}
+        Joint coordinates (default) or absolute body coordinates (:mod:`.absolute`).
+    package_paths : sequence of paths
+        Folders searched first for ``package://`` meshes (:mod:`.meshes`).
 
     Returns
     -------
@@ -185,6 +191,7 @@ def load_urdf(path: str | Path) -> System:
     system = build_system(document, name=robot.get("name") or Path(path).stem, file_format="urdf", links=links,
                           inertials={name: _inertial(document, element) for name, element in links.items()},
                           specs=specs, visuals=[(name, *visual) for name, element in links.items()
-                                                for visual in _visuals(document, element)])
+                                                for visual in _visuals(document, element)],
+                          coordinates=coordinates, package_paths=package_paths)
     report_skipped(document, system)
     return system
