@@ -48,3 +48,37 @@ def test_nonholonomic_every_step_outputs_equal_the_python_recomputation():
     assert trajectory.success, trajectory.message
     assert trajectory.mu.shape[1] == 1 and np.all(np.isfinite(trajectory.mu))
     assert_outputs_match_recomputation(trajectory)
+
+
+def test_range_space_solve_handles_a_mass_matrix_singular_off_the_constraints():
+    from kronlag.symbolic.interop import range_space_solve
+
+    rng = np.random.default_rng(1)
+    m, k = 5, 2
+    G = rng.normal(size=(k, m))
+    null = np.linalg.svd(G)[2][k:].T  # (m, m - k)
+    root = rng.normal(size=(m - k, m - k))
+    M = null @ (root @ root.T + np.eye(m - k)) @ null.T  # singular, positive definite on null(G)
+    h, c = rng.normal(size=m), rng.normal(size=k)
+    expected = np.linalg.solve(np.block([[M, G.T], [G, np.zeros((k, k))]]), np.concatenate([h, c]))
+    qdd, nu = range_space_solve(M.ravel().tolist(), G.ravel().tolist(), h.tolist(), c.tolist())
+    np.testing.assert_allclose(np.concatenate([qdd, nu]), expected, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("name, parameters", [
+    ("four_bar", FOUR_BAR),
+    ("chaplygin_sleigh", dict(m=2.0, I=0.1, a=0.3)),
+])
+def test_jax_jit_vmap_forward_dynamics_equals_the_c_batch(name, parameters):
+    jax = pytest.importorskip("jax")
+    jax.config.update("jax_enable_x64", True)
+    from kronlag.symbolic.interop import jax_functions
+
+    model = derived(name).numeric(parameters, backend="c")
+    rng = np.random.default_rng(2)
+    q, qd = rng.uniform(-3, 3, (200, model.m)), rng.uniform(-3, 3, (200, model.m))
+    batched = jax.jit(jax.vmap(jax_functions(model)["forward_dynamics"], in_axes=(0, 0, None, None)))
+    qdd, lam, mu = batched(q, qd, model.parameter_vector(0.0), 0.0)
+    reference = model.forward_dynamics_batch(q, qd)
+    for got, expected in ((qdd, reference.qdd), (lam, reference.lam), (mu, reference.mu)):
+        np.testing.assert_allclose(np.asarray(got), expected, rtol=1e-9, atol=1e-9)
