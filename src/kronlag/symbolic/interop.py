@@ -40,9 +40,12 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from ..core.kernels import expression_kernel, python_functions, python_source
+import symengine as se
+
+from ..core.kernels import Kernel, expression_kernel, python_functions, python_source
 from ..model.symbols import name_indices
 from . import matrices as catalogue
 
@@ -178,6 +181,32 @@ def range_space_solve(M_flat: Sequence, G_flat: Sequence, h: Sequence, c: Sequen
     return [free[a] - sum(Y[i][a] * nu[i] for i in range(k)) for a in range(m)], nu
 
 
+def _calls_first(kernel: Kernel) -> str:
+    """:func:`python_source` of ``kernel`` with the function calls of its inputs alone (``sin(q[0])``,
+    ``cos(q[0] + q[1])``, ...) evaluated first and passed together through :func:`_materialize`: XLA's
+    fusion on the CPU copies such calls into every consumer otherwise (on the four-bar, eight
+    evaluations of each sine in the forward dynamics; ``jax.lax.optimization_barrier`` does not stop it)."""
+    names = {symbol for symbol, _ in kernel.temporaries}
+    calls = [(symbol, expr) for symbol, expr in kernel.temporaries
+             if isinstance(expr, se.Function) and not expr.free_symbols & names]
+    if not calls:
+        return python_source(kernel)
+    rest = [pair for pair in kernel.temporaries if pair not in calls]
+    lines = python_source(replace(kernel, temporaries=(*calls, *rest))).splitlines()
+    joined = ", ".join(str(symbol) for symbol, _ in calls) + ","
+    lines.insert(1 + len(calls), f"    {joined} = _materialize({joined})")
+    return "\n".join(lines) + "\n"
+
+
+def _materialize(*values) -> tuple:
+    """``values`` (JAX scalars) through a product with the identity, which XLA evaluates once and does
+    not fuse into its consumers."""
+    import jax.numpy as jnp
+
+    product = jnp.stack([jnp.asarray(value, dtype=float) for value in values]) @ jnp.eye(len(values))
+    return tuple(product[i] for i in range(len(values)))
+
+
 def _offsets(sizes: Sequence[int]):
     start = 0
     for size in sizes:
@@ -211,7 +240,9 @@ class _Exported:
         eq = self.equations
         kernel = expression_kernel({name: getattr(eq, name) for name in _DYNAMICS_BLOCKS}, self.inputs,
                                    name="dynamics_terms")
-        function = python_functions(python_source(kernel), ["dynamics_terms"], self.backend.namespace)
+        source = _calls_first(kernel) if self.backend.unrolled else python_source(kernel)
+        namespace = dict(self.backend.namespace, _materialize=_materialize)
+        function = python_functions(source, ["dynamics_terms"], namespace)
         return function["dynamics_terms"], tuple((block.name, block.size) for block in kernel.blocks)
 
     def forward_dynamics(self, q, qd, p, t):
