@@ -33,8 +33,8 @@ from .watch import LimitStop
 if TYPE_CHECKING:
     from ..numeric.numeric_model import NumericModel
 
-__all__ = ["DRIVERS", "Driver", "driver", "has_driver", "driver_source", "run", "Segment", "output_rows", "segment_status", "solution_of",
-           "require", "sundials_libraries"]
+__all__ = ["DRIVERS", "Driver", "driver", "driver_source", "run", "Segment", "output_rows", "segment_status", "solution_of",
+           "require", "sundials_libraries", "has_driver"]
 
 
 _SUNDIALS_LIBRARIES = ("sundials_core", "sundials_nvecserial", "sundials_sunmatrixdense",

@@ -110,9 +110,10 @@ class _Backend:
             self.zeros = lambda *shape: jnp.zeros(shape)
             self.identity_columns = lambda m, columns: jnp.eye(m)[:, list(columns)]
             self.split = lambda x, sizes: [x[start:start + size] for start, size in _offsets(sizes)]
-            # scalar code: under jax.vmap every scalar is one element-wise operation on the batch,
-            # which XLA fuses into one loop; a batched jnp.linalg.solve of small systems is a
-            # LAPACK call per state, several times slower
+            # scalar code for the forward dynamics (its solve unrolled, the kernel's function calls
+            # evaluated once, _calls_first): under jax.vmap every scalar is one element-wise operation
+            # on the batch, which XLA fuses into loops; a batched jnp.linalg.solve of small systems is
+            # a LAPACK call per state, several times slower
             self.unrolled = True
 
 
