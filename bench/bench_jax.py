@@ -11,13 +11,14 @@ The four-bar (``kronlag.models.four_bar``, constant torque ``tau = 1``) at rando
 ``jax.jit(jax.vmap(jax_functions(model)["forward_dynamics"], in_axes=(0, 0, None, None)))`` in
 float64, compiled once before timing, each call ended by ``jax.block_until_ready``, against
 ``model.forward_dynamics_batch(q, qd)`` (C, threads: ``$KRONLAG_THREADS`` or all CPUs; the thread
-count is printed).  Both results are checked against each other first.  Target: JAX within 2x of
-the C batch.
+count is printed), and, for information, against the C batch on one thread.  Both results are
+checked against each other first.  Target: JAX within 2x of the C batch.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -32,6 +33,21 @@ FOUR_BAR = dict(l1=1.0, l2=2.0, l3=2.0, l4=2.0, m1=1.0, m2=2.0, m3=2.0, I1=1 / 1
 
 #: JAX's time per batch over the C batch's, at most.
 TARGET_RATIO = 2.0
+
+
+def one_thread(function):
+    """``function`` run with ``$KRONLAG_THREADS=1`` (the C batch reads it at every call)."""
+    def run():
+        previous = os.environ.get("KRONLAG_THREADS")
+        os.environ["KRONLAG_THREADS"] = "1"
+        try:
+            return function()
+        finally:
+            if previous is None:
+                del os.environ["KRONLAG_THREADS"]
+            else:
+                os.environ["KRONLAG_THREADS"] = previous
+    return run
 
 
 def main() -> None:
@@ -65,6 +81,7 @@ def main() -> None:
     if not error <= 1e-9:
         raise SystemExit(f"JAX and C disagree: {error:.3g}")
     timings = interleaved({"C batch": lambda: model.forward_dynamics_batch(q, qd),
+                           "C batch, 1 thread": one_thread(lambda: model.forward_dynamics_batch(q, qd)),
                            "JAX jit(vmap)": lambda: jax.block_until_ready(batched(Q, QD, p, 0.0))},
                           blocks=3 if args.quick else 9, repeats=3)
     for name, timing in timings.items():
@@ -72,6 +89,8 @@ def main() -> None:
     record.figure("JAX jit(vmap) forward dynamics / C batch, four-bar", ratio(timings, "JAX jit(vmap)", "C batch"),
                   unit="x", target=TARGET_RATIO, better="lower",
                   detail=f"{n} states, C on {codegen.batch_threads()} thread(s)")
+    record.figure("JAX jit(vmap) forward dynamics / C batch on 1 thread, four-bar",
+                  ratio(timings, "JAX jit(vmap)", "C batch, 1 thread"), unit="x", detail=f"{n} states")
     record.finish()
 
 
