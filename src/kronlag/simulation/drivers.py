@@ -297,7 +297,7 @@ def segment_status(segment: Segment, model: NumericModel, kind: str) -> tuple[Re
 
 def solution_of(segments: Sequence[Segment], result: Result, message: str) -> Solution:
     """The :class:`Solution` of consecutive segments (one segment's arrays as they are, not copied)."""
-    def joined(arrays: list[np.ndarray]) -> np.ndarray:
+    def joined(arrays: list) -> np.ndarray:
         return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
 
     derived = {key: joined([segment.derived[key] for segment in segments]) for key in segments[0].derived}
