@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from ..numeric.numeric_model import NumericModel
 
 __all__ = ["DRIVERS", "Driver", "driver", "driver_source", "run", "Segment", "output_rows", "segment_status", "solution_of",
-           "require", "sundials_libraries"]
+           "require", "sundials_libraries", "has_driver"]
 
 
 _SUNDIALS_LIBRARIES = ("sundials_core", "sundials_nvecserial", "sundials_sunmatrixdense",
@@ -125,6 +125,14 @@ def driver_source(model: NumericModel, kind: str) -> str:
     spec = DRIVERS[kind]
     return (model.c_source + model.c_kernels(*spec.kernels) + c_declarations() + _c_file("monitor.c")
             + _c_file("progress.c") + _c_file("limits.c") + _c_file("controller.c") + _c_file(spec.file))
+
+
+def has_driver(model: NumericModel) -> bool:
+    """Whether a driver library of ``model`` is loaded already (it then runs without a compiler: a
+    run need not look for one again, which costs a search of ``PATH``)."""
+    if isinstance(model, ControlledModel):
+        model = model.uncontrolled
+    return bool(_LOADED.get(model))
 
 
 def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
@@ -288,16 +296,19 @@ def segment_status(segment: Segment, model: NumericModel, kind: str) -> tuple[Re
 
 
 def solution_of(segments: Sequence[Segment], result: Result, message: str) -> Solution:
-    """The :class:`Solution` of consecutive segments."""
-    derived = {key: np.concatenate([segment.derived[key] for segment in segments]) for key in segments[0].derived}
-    return Solution(t=np.concatenate([segment.t for segment in segments]),
-                    y=np.concatenate([segment.y for segment in segments]), result=result, message=message,
+    """The :class:`Solution` of consecutive segments (one segment's arrays as they are, not copied)."""
+    def joined(arrays: list) -> np.ndarray:
+        return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
+
+    derived = {key: joined([segment.derived[key] for segment in segments]) for key in segments[0].derived}
+    return Solution(t=joined([segment.t for segment in segments]),
+                    y=joined([segment.y for segment in segments]), result=result, message=message,
                     nfev=sum(segment.nfev for segment in segments), njev=sum(segment.njev for segment in segments),
                     steps=sum(segment.steps for segment in segments), derived=derived,
                     events=tuple(event for segment in segments for event in segment.events),
                     stop=_limit_stop(segments[-1]),
                     parameters=None if segments[0].parameters is None
-                    else np.concatenate([segment.parameters for segment in segments]))
+                    else joined([segment.parameters for segment in segments]))
 
 
 def _limit_stop(segment: Segment) -> LimitStop | None:

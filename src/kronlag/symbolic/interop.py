@@ -20,7 +20,9 @@ Phi, Phi_q          (r,), (r, m)
 A, b                (s, m), (s,)
 gamma, gamma_nh     (r,), (s,): ``Phi_q qdd = gamma``, ``A qdd = gamma_nh``
 forward_dynamics    ``qdd`` (m,), ``lam`` (r,), ``mu`` (s,): ``[[M, G^T], [G, 0]] [qdd; nu] =
-                    [f_Q - C qd - g; gamma; gamma_nh]`` with ``G = [Phi_q; A]`` (full row rank)
+                    [f_Q - C qd - g; gamma; gamma_nh]`` with ``G = [Phi_q; A]`` (full row rank);
+                    with JAX, up to :data:`UNROLLED_SIZE` unknowns, by :func:`range_space_solve`
+                    in scalar operations (fast under ``jax.vmap``)
 inverse_dynamics    input ``qdd`` after ``qd``; ``forces`` (n_a,), ``lam``, ``mu``:
                     ``[B, -Phi_q^T, -A^T] [u; lam; mu] = M qdd + C qd + g - f_Q`` (least squares)
 ==================  =========================================================================
@@ -38,9 +40,12 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from ..core.kernels import expression_kernel, python_functions, python_source
+import symengine as se
+
+from ..core.kernels import Kernel, expression_kernel, python_functions, python_source
 from ..model.symbols import name_indices
 from . import matrices as catalogue
 
@@ -48,7 +53,7 @@ if TYPE_CHECKING:
     from ..numeric.numeric_model import NumericModel
     from .equations import Equations
 
-__all__ = ["casadi_functions", "jax_functions", "MATRICES"]
+__all__ = ["casadi_functions", "jax_functions", "MATRICES", "UNROLLED_SIZE", "range_space_solve"]
 
 #: The matrices exported (the catalogue's, :data:`kronlag.symbolic.matrices.INTEROP`), with whether each
 #: is a vector.
@@ -87,6 +92,7 @@ class _Backend:
             self.identity_columns = lambda m, columns: ca.DM([[1.0 if i == j else 0.0 for j in columns]
                                                                 for i in range(m)])
             self.split = lambda x, sizes: [x[start:start + size] for start, size in _offsets(sizes)]
+            self.unrolled = False
         else:
             import jax.numpy as jnp
 
@@ -104,6 +110,102 @@ class _Backend:
             self.zeros = lambda *shape: jnp.zeros(shape)
             self.identity_columns = lambda m, columns: jnp.eye(m)[:, list(columns)]
             self.split = lambda x, sizes: [x[start:start + size] for start, size in _offsets(sizes)]
+            # scalar code for the forward dynamics (its solve unrolled, the kernel's function calls
+            # evaluated once, _calls_first): under jax.vmap every scalar is one element-wise operation
+            # on the batch, which XLA fuses into loops; a batched jnp.linalg.solve of small systems is
+            # a LAPACK call per state, several times slower
+            self.unrolled = True
+
+
+#: The blocks of the forward dynamics, evaluated by one kernel.
+_DYNAMICS_BLOCKS = ("M", "f_Q", "Cqd", "g", "Phi_q", "A", "gamma", "gamma_nh")
+
+#: Largest augmented system (m + r + s) that JAX's forward dynamics solves by unrolled scalar code
+#: (:func:`range_space_solve`); larger ones by ``jnp.linalg.solve`` of the stacked system (the
+#: unrolled code grows like the cube of the size, and so does its compile time).
+UNROLLED_SIZE = 24
+
+
+def _cholesky(A: list[list], sqrt: Callable) -> tuple[list[list], list]:
+    """The lower Cholesky factor ``L`` of the symmetric positive definite ``A`` (lists of scalars) and
+    the reciprocals of its diagonal (a division costs several multiplications)."""
+    n = len(A)
+    L: list[list] = [[0.0] * n for _ in range(n)]
+    inverse: list = [0.0] * n
+    for j in range(n):
+        L[j][j] = sqrt(A[j][j] - sum((L[j][k] * L[j][k] for k in range(j)), 0.0))
+        inverse[j] = 1.0 / L[j][j]
+        for i in range(j + 1, n):
+            L[i][j] = (A[i][j] - sum((L[i][k] * L[j][k] for k in range(j)), 0.0)) * inverse[j]
+    return L, inverse
+
+
+def _cholesky_solve(factor: tuple[list[list], list], b: list) -> list:
+    """``x`` with ``L L^T x = b`` (``factor`` from :func:`_cholesky`)."""
+    L, inverse = factor
+    n = len(b)
+    y: list = [0.0] * n
+    for i in range(n):
+        y[i] = (b[i] - sum((L[i][k] * y[k] for k in range(i)), 0.0)) * inverse[i]
+    x: list = [0.0] * n
+    for i in reversed(range(n)):
+        x[i] = (y[i] - sum((L[k][i] * x[k] for k in range(i + 1, n)), 0.0)) * inverse[i]
+    return x
+
+
+def range_space_solve(M_flat: Sequence, G_flat: Sequence, h: Sequence, c: Sequence, *,
+                      sqrt: Callable = math.sqrt) -> tuple[list, list]:
+    """``(qdd, nu)`` of ``[[M, G^T], [G, 0]] [qdd; nu] = [h; c]`` in scalar operations (lists of numbers,
+    or of JAX scalars with ``sqrt=jnp.sqrt``; row-major ``M`` (m x m) and ``G`` (k x m)).
+
+    ``M`` need only be positive definite on the null space of ``G`` (full row rank): with ``rho =
+    trace(M) / trace(G G^T)`` the first block row plus ``rho G^T (G qdd - c) = 0`` gives
+    ``M_rho qdd + G^T nu = h + rho G^T c`` with ``M_rho = M + rho G^T G`` positive definite; then
+    ``nu = S^-1 (G M_rho^-1 (h + rho G^T c) - c)``, ``S = G M_rho^-1 G^T``, and
+    ``qdd = M_rho^-1 (h + rho G^T c - G^T nu)``, by two Cholesky factorizations.
+    """
+    m, k = len(h), len(c)
+    M = [list(M_flat[i * m:(i + 1) * m]) for i in range(m)]
+    G = [list(G_flat[i * m:(i + 1) * m]) for i in range(k)]
+    b = list(h)
+    if k:
+        rho = sum(M[i][i] for i in range(m)) / sum(G[i][j] * G[i][j] for i in range(k) for j in range(m))
+        M = [[M[a][j] + rho * sum(G[i][a] * G[i][j] for i in range(k)) for j in range(m)] for a in range(m)]
+        b = [b[a] + rho * sum(G[i][a] * c[i] for i in range(k)) for a in range(m)]
+    L = _cholesky(M, sqrt)
+    free = _cholesky_solve(L, b)
+    if not k:
+        return free, []
+    Y = [_cholesky_solve(L, G[i]) for i in range(k)]  # M_rho^-1 G^T, by columns
+    S = [[sum(G[i][a] * Y[j][a] for a in range(m)) for j in range(k)] for i in range(k)]
+    nu = _cholesky_solve(_cholesky(S, sqrt), [sum(G[i][a] * free[a] for a in range(m)) - c[i] for i in range(k)])
+    return [free[a] - sum(Y[i][a] * nu[i] for i in range(k)) for a in range(m)], nu
+
+
+def _calls_first(kernel: Kernel) -> str:
+    """:func:`python_source` of ``kernel`` with the function calls of its inputs alone (``sin(q[0])``,
+    ``cos(q[0] + q[1])``, ...) evaluated first and passed together through :func:`_materialize`: XLA's
+    fusion on the CPU copies such calls into every consumer otherwise (on the four-bar, eight
+    evaluations of each sine in the forward dynamics; ``jax.lax.optimization_barrier`` does not stop it)."""
+    names = {symbol for symbol, _ in kernel.temporaries}
+    calls = [(symbol, expr) for symbol, expr in kernel.temporaries
+             if isinstance(expr, se.Function) and not expr.free_symbols & names]
+    if not calls:
+        return python_source(kernel)
+    rest = [pair for pair in kernel.temporaries if pair not in calls]
+    lines = python_source(replace(kernel, temporaries=(*calls, *rest))).splitlines()
+    joined = ", ".join(str(symbol) for symbol, _ in calls) + ","
+    lines.insert(1 + len(calls), f"    {joined} = _materialize({joined})")
+    return "\n".join(lines) + "\n"
+
+
+def _materialize(*values) -> tuple:
+    """``values`` (JAX scalars) through a product with the identity, which XLA evaluates once and does
+    not fuse into its consumers."""
+    import jax.numpy as jnp
+
+    product = jnp.stack([jnp.asarray(value, dtype=float) for value in values]) @ jnp.eye(len(values))
+    return tuple(product[i] for i in range(len(values)))
 
 
 def _offsets(sizes: Sequence[int]):
@@ -117,9 +219,9 @@ class _Exported:
     """The expressions of ``equations`` as functions ``(q, qd, p, t) -> backend array``."""
 
     def __init__(self, equations: Equations, backend: _Backend):
-        eq = equations
+        eq = self.equations = equations
         self.backend, self.shape = backend, eq.shape
-        inputs = [("t", eq.time), ("q", eq.coordinates), ("qd", eq.speeds), ("p", eq.parameters)]
+        inputs = self.inputs = [("t", eq.time), ("q", eq.coordinates), ("qd", eq.speeds), ("p", eq.parameters)]
         kernels = [expression_kernel({name: getattr(eq, name)}, inputs, name=name) for name in MATRICES]
         source = "\n\n".join(python_source(kernel) for kernel in kernels)
         functions = python_functions(source, list(MATRICES), backend.namespace)
@@ -132,15 +234,33 @@ class _Exported:
         entries = function(t, q, qd, p) if shape[0] * shape[1] else []
         return self.backend.vector(entries) if is_vector else self.backend.matrix(entries, shape)
 
+    @functools.cached_property
+    def _terms(self) -> tuple[Callable, tuple[tuple[str, int], ...]]:
+        """The blocks of the forward dynamics in one kernel (common subexpressions shared by all of
+        them): its function and the blocks' names and sizes."""
+        eq = self.equations
+        kernel = expression_kernel({name: getattr(eq, name) for name in _DYNAMICS_BLOCKS}, self.inputs,
+                                   name="dynamics_terms")
+        source = _calls_first(kernel) if self.backend.unrolled else python_source(kernel)
+        namespace = dict(self.backend.namespace, _materialize=_materialize)
+        function = python_functions(source, ["dynamics_terms"], namespace)
+        return function["dynamics_terms"], tuple((block.name, block.size) for block in kernel.blocks)
+
     def forward_dynamics(self, q, qd, p, t):
         """``(qdd, lam, mu)`` from the augmented system (full-rank constraints)."""
         bk, (m, r, s) = self.backend, self.shape
-        M = self("M", q, qd, p, t)
-        h = self("f_Q", q, qd, p, t) - self("Cqd", q, qd, p, t) - self("g", q, qd, p, t)
+        function, sizes = self._terms
+        flat = function(t, q, qd, p)
+        blocks = dict(zip((name for name, _ in sizes), bk.split(flat, [size for _, size in sizes])))
+        h = [f - c - g for f, c, g in zip(blocks["f_Q"], blocks["Cqd"], blocks["g"])]
+        G, c = blocks["Phi_q"] + blocks["A"], blocks["gamma"] + blocks["gamma_nh"]
+        if bk.unrolled and m + r + s <= UNROLLED_SIZE:
+            qdd, nu = range_space_solve(blocks["M"], G, h, c, sqrt=bk.namespace["sqrt"])
+            return bk.vector(qdd), bk.vector(nu[:r]), bk.vector(nu[r:])
+        M, h = bk.matrix(blocks["M"], (m, m)), bk.vector(h)
         if r + s == 0:
             return bk.solve(M, h), bk.zeros(0), bk.zeros(0)
-        G = bk.stack_rows(self("Phi_q", q, qd, p, t), self("A", q, qd, p, t))
-        c = bk.stack_rows(self("gamma", q, qd, p, t), self("gamma_nh", q, qd, p, t))
+        G, c = bk.matrix(G, (r + s, m)), bk.vector(c)
         augmented = bk.stack_rows(bk.stack_columns(M, bk.transpose(G)),
                                   bk.stack_columns(G, bk.zeros(r + s, r + s)))
         solution = bk.solve(augmented, bk.stack_rows(h, c))

@@ -207,12 +207,14 @@ const char *kronlag_cvode_flag_name(int flag)
     return CVodeGetReturnFlagName(flag);
 }
 
-/* Derived outputs at the first n output rows of o (y_out, t_out): qdd, lam, mu from forward
- * dynamics without Baumgarte terms (NaN where the configuration is singular), the kinetic energy
- * T = 1/2 qd^T M qd, the potential energy, Phi and [Phi_q qd + Phi_t; A qd + b]. */
+/* Derived outputs at the first n output rows of o (y_out, t_out), from one evaluation of the
+ * dynamics terms per row: qdd, lam, mu from the augmented solve without Baumgarte terms (NaN where
+ * the configuration is singular), the kinetic energy T = 1/2 qd^T M qd, the potential energy, Phi
+ * and [Phi_q qd + Phi_t; A qd + b] (M, Phi, Phi_q, Phi_t, A, b do not depend on qd). */
 static void kl_outputs(const kronlag_options *o, int n)
 {
-    double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1];
+    double terms[KL_TERMS_ + 1], nu[KL_K + 1];
+    const double *M = terms + KRONLAG_DYNAMICS_M;
     for (int k = 0; k < n; ++k) {
         const double *q = o->y_out + k * KL_N, *qd = q + KL_M, t = o->t_out[k];
         double *a = o->qdd + k * KL_M, *l = o->lam + k * KL_R, *u = o->mu + k * KL_S;
@@ -223,21 +225,24 @@ static void kl_outputs(const kronlag_options *o, int n)
             kl_control_record(o, k);
         }
         const double *p = o->control_mode ? o->p_out + (long)k * o->n_parameters : o->p;
-        if (kronlag_forward_dynamics(t, q, qd, p, 0.0, 0.0, a, l, u)) {
+        int rank;
+        kronlag_dynamics(t, q, qd, p, terms);
+        if (kronlag_solve_at(t, q, qd, p, terms, 0.0, 0.0, KL_K, a, nu, &rank)) {
             for (int i = 0; i < KL_M; ++i) a[i] = NAN;
-            for (int i = 0; i < KL_R; ++i) l[i] = NAN;
-            for (int i = 0; i < KL_S; ++i) u[i] = NAN;
+            for (int i = 0; i < KL_K; ++i) nu[i] = NAN;
         }
-        kl_constraints(t, q, p, terms, B, c);
+        memcpy(l, nu, KL_R * sizeof(double));
+        memcpy(u, nu + KL_R, KL_S * sizeof(double));
         double energy = 0.0;
         for (int i = 0; i < KL_M; ++i)
-            for (int j = 0; j < KL_M; ++j) energy += qd[i] * terms[i * KL_M + j] * qd[j];
+            for (int j = 0; j < KL_M; ++j) energy += qd[i] * M[i * KL_M + j] * qd[j];
         o->kinetic_energy[k] = 0.5 * energy;
         kronlag_potential_energy(t, q, qd, p, o->potential_energy + k);
         memcpy(o->position_residual + k * KL_R, terms + KL_PHI, KL_R * sizeof(double));
         for (int i = 0; i < KL_K; ++i) {
-            double sum = c[i];
-            for (int j = 0; j < KL_M; ++j) sum += B[i * KL_M + j] * qd[j];
+            const double *row = i < KL_R ? terms + KL_PHI_Q + i * KL_M : terms + KL_A + (i - KL_R) * KL_M;
+            double sum = i < KL_R ? terms[KL_PHI_T + i] : terms[KL_B + i - KL_R];
+            for (int j = 0; j < KL_M; ++j) sum += row[j] * qd[j];
             o->velocity_residual[k * KL_K + i] = sum;
         }
     }

@@ -9,7 +9,7 @@ import numpy as np
 
 from ...numeric import codegen
 from ...numeric.tolerances import CVODE_TIGHTEST
-from ..drivers import Segment, require, run, segment_status, solution_of
+from ..drivers import Segment, has_driver, require, run, segment_status, solution_of
 from ..problem import MultibodyProblem, Solution, Solver, SolverOptions
 from ..stepping import ApproachWatch
 from ..trajectory import Result
@@ -67,7 +67,8 @@ class CompiledSolver(Solver):
     @staticmethod
     def supports(model: NumericModel) -> bool:
         """Whether ``model`` can run compiled: C backend, no time-varying parameter."""
-        return model.backend == "c" and not model.time_varying and codegen.c_compiler() is not None
+        return model.backend == "c" and not model.time_varying and (has_driver(model)
+                                                                      or codegen.c_compiler() is not None)
 
     def solve(self, problem: MultibodyProblem) -> Solution:
         require(self, problem.model)
