@@ -203,8 +203,8 @@ class ExpressionConverter:
                 raise InputError(f"symbol {expr} is not an input of the expressions (inputs: "
                                  f"{', '.join(sorted(self._by_name))})")
             return target
-        if expr.is_Number:  # with infinities, NaN and the imaginary unit (refused as SymPy's are)
-            return self._number(expr._sympy_())
+        if expr.is_Number:  # with infinities, NaN and complex numbers: as SymPy's (the same errors)
+            return self(expr._sympy_())
         if not expr.args:
             return expr
         args = [self.native(arg) for arg in expr.args]
@@ -222,15 +222,14 @@ class ExpressionConverter:
 
     def native_matrix(self, matrix: se.DenseMatrix, name: str = "matrix") -> list[list[se.Basic]]:
         """The entries of the SymEngine ``matrix`` (called ``name`` in errors) converted by :meth:`native`."""
-        return [[self._located(self.native, matrix[i, j], f"{name}[{i}, {j}]") for j in range(matrix.cols)]
+        return [[self._located(matrix[i, j], f"{name}[{i}, {j}]") for j in range(matrix.cols)]
                 for i in range(matrix.rows)]
 
-    @staticmethod
-    def _located(convert: Callable, expr, where: str) -> se.Basic:
+    def _located(self, expr: se.Basic, where: str) -> se.Basic:
         try:
-            return convert(expr)
-        except ModelError as error:
-            raise ModelError(f"{where} = {expr}: {error}") from None
+            return self.native(expr)
+        except ModelError as error:  # the entry as SymPy prints it, as :meth:`entry` names it
+            raise ModelError(f"{where} = {sp.sympify(expr)}: {error}") from None
 
     def matrix(self, matrix: sp.MatrixBase, name: str = "matrix") -> list[list[se.Basic]]:
         """The entries of ``matrix`` (called ``name`` in errors) converted."""
