@@ -135,12 +135,13 @@ def worker_kronlag(n: int, angles: str) -> dict:
 
 
 def worker_derive(n: int, angles: str) -> dict:
-    """``derive`` alone, what building the numeric model needs (no SymPy matrix is formed)."""
+    """``derive`` alone, what building the numeric model needs (no SymPy matrix is formed): CPU
+    seconds of this process, which other jobs on a shared machine disturb less than the wall clock."""
     import kronlag
 
-    start = time.perf_counter()
+    start = time.process_time()
     kronlag.derive(kronlag.models.closed_chain(n, angles))
-    return {"seconds": time.perf_counter() - start}
+    return {"seconds": time.process_time() - start}
 
 
 def growth_exponent(sizes, seconds) -> float:
@@ -312,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{'(not run)':>10}  {'-':>21}", flush=True)
 
         print()
-        print(f"growth of derive alone (the numeric model's derivation), load average {os.getloadavg()[0]:.1f} "
+        print(f"growth of derive alone (the numeric model's derivation, CPU seconds), load average {os.getloadavg()[0]:.1f} "
               f"on {os.cpu_count()} CPU(s) at the start")
         for angles, sizes in GROWTH_SIZES.items():
             times = [best_time("derive", n, angles, KRONLAG_BUDGET_S, repeats) for n in sizes]

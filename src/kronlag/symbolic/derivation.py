@@ -123,8 +123,14 @@ def _canonical_mul(args: list) -> sp.Expr:
 
 
 def _jacobian(vector: se.DenseMatrix, variables: list) -> se.DenseMatrix:
+    zero = se.Integer(0)
+    entries = [vector[i] for i in range(vector.rows)]
+    # a derivative by an absent variable is zero (by name: SymEngine's == is slow)
+    present = [{symbol.name for symbol in entry.free_symbols} for entry in entries]
+    names = [x.name for x in variables]
     return se.DenseMatrix(vector.rows, len(variables),
-                          [se.diff(vector[i], x) for i in range(vector.rows) for x in variables])
+                          [se.diff(entry, x) if name in free else zero
+                           for entry, free in zip(entries, present) for x, name in zip(variables, names)])
 
 
 def _vee(skew: se.DenseMatrix) -> list:
@@ -290,6 +296,8 @@ class _Accumulator:
         self.second_terms: dict[tuple[int, int], list] = defaultdict(list)
         self.velocity_terms: dict[tuple[int, int], list] = defaultdict(list)
         self.pending: list[tuple] = []  # the body terms whose Md and T2 terms are not summed yet
+        self.products: dict[tuple, se.Basic | None] = {}  # column dot products, None if zero (_add_gram)
+        self.interned: dict[se.Basic, se.Basic] = {}
         self._coriolis: tuple[se.DenseMatrix, se.DenseMatrix] | None = None
 
     def add(self, term: KineticTerm) -> None:
@@ -310,7 +318,7 @@ class _Accumulator:
         jacobian = se.DenseMatrix(jacobian.rows, len(support), [jacobian[r, k] for r in rows for k in support])
         qd = se.DenseMatrix(len(support), 1, [self.qd[k] for k in support])
         weighted = _weigh(weight, jacobian)  # W J, so J^T W = weighted^T
-        _scatter(self.mass_terms, factor, support, support, weighted.T * jacobian, symmetric=True)
+        self._add_gram(factor, support, weighted, jacobian)
         self.pending.append((weight, factor, support, jacobian, weighted, qd))
         # Velocity terms C qd = Md qd - dT/dq of this body: J^T W (Jd qd) + [(Jd_i - dJ/dq_i qd) . W v]_i;
         # for a gradient J the bracket vanishes (Jd_i = dJ/dq_i qd).  For the body-frame angular
@@ -324,6 +332,27 @@ class _Accumulator:
                                                omega[2] * spin[0] - omega[0] * spin[2],
                                                omega[0] * spin[1] - omega[1] * spin[0]])
             _scatter(self.velocity_terms, factor, support, [0], jacobian.T * gyroscopic)
+
+    def _add_gram(self, factor, support: list, weighted: se.DenseMatrix, jacobian: se.DenseMatrix) -> None:
+        """The upper triangle of ``weighted^T jacobian`` (``J^T W J``) into the terms of ``M``, each
+        entry a dot product of two columns, memoized by the columns: in a chain the bodies beyond a
+        joint share the columns of the joints before it (absolute angles: the same expressions), so
+        most of the n^3 / 3 products of the bodies' terms are computed once."""
+        rows, intern = range(jacobian.rows), self.interned.setdefault
+        # equal entries made one object: a tuple compares them by identity first (SymEngine's == is slow)
+        columns = [tuple(intern(jacobian[r, b], jacobian[r, b]) for r in rows) for b in range(len(support))]
+        weighted_columns = columns if weighted is jacobian else [
+            tuple(intern(weighted[r, a], weighted[r, a]) for r in rows) for a in range(len(support))]
+        for a, (i, left) in enumerate(zip(support, weighted_columns)):
+            for j, right in zip(support[a:], columns[a:]):
+                key = (left, right)
+                if key in self.products:
+                    entry = self.products[key]
+                else:
+                    entry = se.Add(*(x * y for x, y in zip(left, right)))
+                    entry = self.products[key] = None if entry.is_zero else entry
+                if entry is not None:
+                    self.mass_terms[(i, j)].append((factor, entry))
 
     def _add_coriolis(self, weight, factor, support: list, jacobian: se.DenseMatrix, weighted: se.DenseMatrix,
                       qd: se.DenseMatrix) -> None:
