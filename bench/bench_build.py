@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
-"""Build time: derivation + C build of ``closed_chain(n)``, against the targets of issue 10.
+"""Build time: derivation + C build of ``closed_chain(n)``, against the targets of issue 19.
 
 Run by hand (not a pytest test)::
 
-    python3 bench/bench_build.py                  # closed_chain(30, "relative") and (60, "absolute")
+    python3 bench/bench_build.py                  # closed_chain(40, "relative") and (100, "absolute")
     python3 bench/bench_build.py --n 12 20        # both conventions at each n
     python3 bench/bench_build.py --n 20 --compare-cse
 
@@ -12,8 +12,11 @@ an empty compiled-library cache (``$KRONLAG_CACHE`` set to a new temporary
 directory):
 
 * the total a user waits for: ``kronlag.derive(system)`` then
-  ``eom.numeric(parameters, backend="c")`` (target: at most 30 s for
-  ``closed_chain(30, "relative")`` and ``closed_chain(60, "absolute")`` on a 2-core machine);
+  ``eom.numeric(parameters, backend="c")`` (issue 19's targets: at most 10 s for
+  ``closed_chain(40, "relative")``, 20 s for ``closed_chain(100, "absolute")``, on a 2-core
+  machine) and the peak memory of that process (target 600 MB);
+* the first ``kronlag.simulate`` after it (default method, 0.05 s from an assembled state): what
+  it compiles on top (target 1 s);
 * the same work again, split into its phases: *derivation*, *conversion*
   (SymPy -> SymEngine of M, h = f_Q - C qd - g, Phi, Phi_q, the time derivatives
   gamma, ...), *CSE* (``symengine.cse`` of the forward-dynamics kernel), *C text*
@@ -37,7 +40,10 @@ import time
 
 SCRIPT = os.path.abspath(__file__)
 #: Derivation + C build time targets (s) by case; other cases are reported without a target.
-TARGETS_S = {(30, "relative"): 30.0, (60, "absolute"): 30.0}
+TARGETS_S = {(40, "relative"): 10.0, (100, "absolute"): 20.0}
+#: Peak memory (MB) and first-simulate (s) targets of every case.
+PEAK_MB_TARGET = 600.0
+FIRST_SIMULATE_TARGET_S = 1.0
 #: The Python backend is built for comparison up to this many links.
 PYTHON_BACKEND_MAX_N = 20
 
@@ -49,12 +55,25 @@ def measure(n: int, angles: str, compare_cse: bool) -> dict:
 
     from kronlag import codegen, derive, models
 
+    import resource
+
+    import numpy as np
+
+    from kronlag import simulate
+
     result: dict = {}
     start = time.perf_counter()
     eom = derive(models.closed_chain(n, angles))
     values = {p.name: 1.0 for p in eom.parameters}
-    eom.numeric(values, backend="c")
+    values.update(xg=0.6 * n, yg=0.0)
+    model = eom.numeric(values, backend="c")
     result["total"] = time.perf_counter() - start
+    result["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    guess = np.linspace(0.8, -0.8, n) if angles == "absolute" else np.r_[0.8, np.full(n - 1, -1.6 / (n - 1))]
+    q0, qd0 = model.assemble(guess)
+    start = time.perf_counter()
+    simulate(model, (0.0, 0.05), q0, qd0)
+    result["first_simulate"] = time.perf_counter() - start
 
     phases = {}
     start = time.perf_counter()
@@ -77,7 +96,7 @@ def measure(n: int, angles: str, compare_cse: bool) -> dict:
         library = codegen.CLibrary([kernel], m=eom.shape[0], n_parameters=len(eom.parameters))
         phases["compilation"] = time.perf_counter() - start - phases["C text"]
     result.update(phases=phases, temporaries=len(kernel.temporaries), source_kb=len(library.source) / 1024,
-                  kernel_kb=len(text) / 1024, parts=1 + min(os.cpu_count() or 1, 8))
+                  kernel_kb=len(text) / 1024, parts=codegen.library_parts(library.source))
     if n <= PYTHON_BACKEND_MAX_N:
         start = time.perf_counter()
         eom.numeric(values, backend="python")
@@ -107,7 +126,8 @@ def main() -> None:
         return
     cases = ([(n, angles) for n in arguments.n for angles in ("absolute", "relative")] if arguments.n
              else list(TARGETS_S))
-    print(f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
+    print(f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, load average "
+          f"{os.getloadavg()[0]:.1f} at the start (a shared machine: other jobs slow the compiler)")
     for n, angles in cases:
         with tempfile.TemporaryDirectory() as cache:
             command = [sys.executable, SCRIPT, "--case", str(n), angles]
@@ -120,7 +140,11 @@ def main() -> None:
         verdict = "" if target is None else f"  (target {target:.0f} s: {'ok' if r['total'] <= target else 'OVER'})"
         print(f"\nclosed_chain({n}, {angles!r}): {r['temporaries']} temporaries, {r['kernel_kb']:.0f} KiB of kernel C "
               f"({r['source_kb']:.0f} KiB with the solver), compiled in {r['parts']} parallel parts")
-        print(f"  derive + eom.numeric(backend='c')  {r['total']:7.2f} s{verdict}")
+        print(f"  derive + eom.numeric(backend='c')  {r['total']:7.2f} s{verdict}  (load {os.getloadavg()[0]:.1f})")
+        print(f"  peak memory                        {r['peak_mb']:7.0f} MB  (target {PEAK_MB_TARGET:.0f} MB: "
+              f"{'ok' if r['peak_mb'] <= PEAK_MB_TARGET else 'OVER'})")
+        print(f"  first simulate                     {r['first_simulate']:7.2f} s  (target {FIRST_SIMULATE_TARGET_S:.0f} s: "
+              f"{'ok' if r['first_simulate'] <= FIRST_SIMULATE_TARGET_S else 'OVER'})")
         for phase, seconds in r["phases"].items():
             print(f"    {phase:30s} {seconds:7.2f} s")
         if "numeric_python" in r:

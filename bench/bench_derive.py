@@ -64,6 +64,10 @@ TARGETS = [
     (50, "absolute", "seconds", 5.0),
 ]
 KRONLAG_ONLY = [(20, "relative"), (50, "absolute")]
+#: Growth of the derivation for the numeric model (``derive`` alone: its matrices stay in SymEngine
+#: until read) in both conventions (issue 19: no worse than about n^2.5), sizes per convention.
+GROWTH_SIZES = {"relative": (10, 20, 40), "absolute": (25, 50, 100)}
+GROWTH_TARGET = 2.5
 
 
 # --------------------------------------------------------------------------
@@ -130,6 +134,23 @@ def worker_kronlag(n: int, angles: str) -> dict:
     return {"seconds": time.perf_counter() - start}
 
 
+def worker_derive(n: int, angles: str) -> dict:
+    """``derive`` alone, what building the numeric model needs (no SymPy matrix is formed): CPU
+    seconds of this process, which other jobs on a shared machine disturb less than the wall clock."""
+    import kronlag
+
+    start = time.process_time()
+    kronlag.derive(kronlag.models.closed_chain(n, angles))
+    return {"seconds": time.process_time() - start}
+
+
+def growth_exponent(sizes, seconds) -> float:
+    """Least-squares slope of log(seconds) against log(n)."""
+    import numpy as np
+
+    return float(np.polyfit(np.log(sizes), np.log(seconds), 1)[0])
+
+
 def worker_sanity(n: int, angles: str) -> dict:
     """Compare M, C qd + g and Phi_q of both tools at a random point."""
     import random
@@ -175,7 +196,7 @@ def worker_sanity(n: int, angles: str) -> dict:
     return {"errors": errors, "ok": all(e < 1e-9 for e in errors.values())}
 
 
-WORKERS = {"sympy": worker_sympy, "kronlag": worker_kronlag, "sanity": worker_sanity}
+WORKERS = {"sympy": worker_sympy, "kronlag": worker_kronlag, "derive": worker_derive, "sanity": worker_sanity}
 
 
 # --------------------------------------------------------------------------
@@ -290,6 +311,19 @@ def main(argv: list[str] | None = None) -> int:
             results[(n, angles)] = (kron, None)
             print(f"{n:>3}  {angles:8s}  {fmt_seconds(kron, KRONLAG_BUDGET_S):>10}  "
                   f"{'(not run)':>10}  {'-':>21}", flush=True)
+
+        print()
+        print(f"growth of derive alone (the numeric model's derivation, CPU seconds), load average {os.getloadavg()[0]:.1f} "
+              f"on {os.cpu_count()} CPU(s) at the start")
+        for angles, sizes in GROWTH_SIZES.items():
+            times = [best_time("derive", n, angles, KRONLAG_BUDGET_S, repeats) for n in sizes]
+            listed = ", ".join(f"n={n}: {fmt_seconds(t, KRONLAG_BUDGET_S)} s" for n, t in zip(sizes, times))
+            if None in times:
+                print(f"  {angles:8s} {listed}  (a case did not finish)")
+                continue
+            exponent = growth_exponent(sizes, times)
+            verdict = "PASS" if exponent <= GROWTH_TARGET else "MISS"
+            print(f"  {angles:8s} {listed}  ~ n^{exponent:.2f} (target <= n^{GROWTH_TARGET}) {verdict}")
 
         print()
         print("targets")

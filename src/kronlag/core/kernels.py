@@ -133,6 +133,8 @@ class ExpressionConverter:
 
     def __init__(self, renames: dict[sp.Symbol, se.Symbol]):
         self.memo: dict = dict(renames)
+        self._by_name = {symbol.name: target for symbol, target in renames.items()}
+        self._native_memo: dict = {}  # apart: a SymEngine symbol equals the SymPy one of its name
         self.constants: dict[str, float] = {}
         self._placeholders: dict[float, se.Symbol] = {}
 
@@ -185,6 +187,49 @@ class ExpressionConverter:
             symbol = self._placeholders[value] = se.Symbol(f"K{len(self._placeholders)}")
             self.constants[symbol.name] = value
         return symbol
+
+    def native(self, expr: se.Basic) -> se.Basic:
+        """The same conversion for an expression already in SymEngine whose symbols are named as
+        the inputs (the derivation's own matrices: no round trip through SymPy); memoized."""
+        result = self._native_memo.get(expr)
+        if result is None:
+            result = self._native_memo[expr] = self._build_native(expr)
+        return result
+
+    def _build_native(self, expr: se.Basic) -> se.Basic:
+        if isinstance(expr, se.Symbol):
+            target = self._by_name.get(expr.name)
+            if target is None:
+                raise InputError(f"symbol {expr} is not an input of the expressions (inputs: "
+                                 f"{', '.join(sorted(self._by_name))})")
+            return target
+        if expr.is_Number:  # with infinities, NaN and complex numbers: as SymPy's (the same errors)
+            return self(expr._sympy_())
+        if not expr.args:
+            return expr
+        args = [self.native(arg) for arg in expr.args]
+        if isinstance(expr, se.Add):
+            return se.Add(*args)
+        if isinstance(expr, se.Mul):
+            return se.Mul(*args)
+        if isinstance(expr, se.Pow):
+            return se.Pow(*args)
+        if isinstance(expr, se.Piecewise):  # SymEngine flattens the (value, condition) pairs
+            return se.Piecewise(*zip(args[::2], args[1::2]))
+        if isinstance(expr, se.FunctionSymbol):
+            raise NotImplementedError(f"cannot generate code for the undefined function {expr}")
+        return expr.func(*args)
+
+    def native_matrix(self, matrix: se.DenseMatrix, name: str = "matrix") -> list[list[se.Basic]]:
+        """The entries of the SymEngine ``matrix`` (called ``name`` in errors) converted by :meth:`native`."""
+        return [[self._located(matrix[i, j], f"{name}[{i}, {j}]") for j in range(matrix.cols)]
+                for i in range(matrix.rows)]
+
+    def _located(self, expr: se.Basic, where: str) -> se.Basic:
+        try:
+            return self.native(expr)
+        except ModelError as error:  # the entry as SymPy prints it, as :meth:`entry` names it
+            raise ModelError(f"{where} = {sp.sympify(expr)}: {error}") from None
 
     def matrix(self, matrix: sp.MatrixBase, name: str = "matrix") -> list[list[se.Basic]]:
         """The entries of ``matrix`` (called ``name`` in errors) converted."""

@@ -49,11 +49,15 @@ __all__ = ["NumericModel", "BATCH_MATRICES"]
 
 #: The matrices :meth:`NumericModel.evaluate_batch` evaluates (the accessors of the catalogue).
 BATCH_MATRICES = catalogue.ACCESSORS
-#: Kernels compiled into one library on first use of any of them (the ``"dynamics"`` kernel, with the
-#: solver, is built with the model): the two Coriolis matrices, by far the largest kernels, which the
-#: simulation does not need (one compile for both), and the other accessors.
+#: Kernels compiled with the model, in the library of the ``"dynamics"`` kernel and its solver: the
+#: small accessors the integrators and their drivers read (the constraints, the potential energy;
+#: a first ``simulate`` compiles no kernel again).  The others are compiled into one library on first
+#: use of any of them: the two Coriolis matrices, by far the largest kernels, which the simulation does
+#: not need (one compile for both), and the rest of the accessors (``M``, ``Cqd``).
 _CORIOLIS = ("C", "C_christoffel")
-_LIBRARY_GROUPS = {"accessors": tuple(name for name in catalogue.ACCESSORS if name not in _CORIOLIS),
+_EAGER = ("Phi", "Phi_q", "Phi_t", "gamma", "A", "b", "gamma_nh", "g", "f_Q", "potential_energy")
+_LIBRARY_GROUPS = {"dynamics": ("dynamics", *_EAGER),
+                   "accessors": tuple(name for name in catalogue.ACCESSORS if name not in (*_CORIOLIS, *_EAGER)),
                    "coriolis": _CORIOLIS}
 _GROUP_OF = {kernel: group for group, kernels in _LIBRARY_GROUPS.items() for kernel in kernels}
 #: Former backend names, still accepted with a DeprecationWarning.
@@ -93,10 +97,11 @@ class NumericModel(MatrixAccessors):
 
     Notes
     -----
-    The forward-dynamics kernel is generated and compiled here; the other
-    matrices on first use (``C`` and ``C_christoffel``, the largest, together
-    apart from the rest).  Every call uses its own buffers: a model may be shared
-    between threads.
+    The forward-dynamics kernel and the small matrices the integrators read (the
+    constraints, ``g``, ``f_Q``, the potential energy) are generated and compiled here,
+    into one library; the other matrices on first use (``C`` and ``C_christoffel``, the
+    largest, together apart from ``M`` and ``Cqd``).  Every call uses its own buffers:
+    a model may be shared between threads.
     """
 
     def __init__(self, equations: Equations, parameters: Mapping, *, backend: str = "auto",
@@ -232,9 +237,11 @@ class NumericModel(MatrixAccessors):
     def c_kernels(self, *names: str) -> str:
         """C source of the kernels ``names`` (e.g. ``"tangent"``, ``"potential_energy"``), to be
         appended to :attr:`c_source` by the compiled integrators (C backend only)."""
+        names = tuple(name for name in names if name not in _LIBRARY_GROUPS["dynamics"])  # in c_source already
         for name in names:
             if name not in self._c_kernels:
-                self._c_kernels[name] = codegen.c_kernel(self._source.kernel(name), 1)[0]
+                # in part 0: the library of a driver keeps the kernel parts of c_source, compiled already
+                self._c_kernels[name] = codegen.c_kernel(self._source.kernel(name), 0)[0]
         return "".join(self._c_kernels[name] for name in names)
 
     @property

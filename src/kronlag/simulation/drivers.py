@@ -123,8 +123,10 @@ def driver_source(model: NumericModel, kind: str) -> str:
     kernels, :func:`~.interface.c_declarations`, ``monitor.c``, ``progress.c``, ``limits.c``,
     ``controller.c`` and the driver's file (also the core of an exported FMU)."""
     spec = DRIVERS[kind]
-    return (model.c_source + model.c_kernels(*spec.kernels) + c_declarations() + _c_file("monitor.c")
-            + _c_file("progress.c") + _c_file("limits.c") + _c_file("controller.c") + _c_file(spec.file))
+    # the driver in part 0 (KRONLAG_IN_PART): its library reuses the kernel parts of the model's, compiled already
+    return (model.c_source + model.c_kernels(*spec.kernels) + "#if KRONLAG_IN_PART(0)\n" + c_declarations()
+            + _c_file("monitor.c") + _c_file("progress.c") + _c_file("limits.c") + _c_file("controller.c")
+            + _c_file(spec.file) + "#endif\n")
 
 
 def has_driver(model: NumericModel) -> bool:

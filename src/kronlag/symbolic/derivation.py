@@ -41,7 +41,8 @@ from ..model.bodies import RigidBody
 from ..model.contributions import KineticTerm, Velocity
 from ..model.symbols import t
 from ..model.system import System
-from .equations import Equations
+from .equations import Equations, acceleration_offset
+from .matrices import VECTORS
 
 __all__ = ["derive"]
 
@@ -122,8 +123,14 @@ def _canonical_mul(args: list) -> sp.Expr:
 
 
 def _jacobian(vector: se.DenseMatrix, variables: list) -> se.DenseMatrix:
+    zero = se.Integer(0)
+    entries = [vector[i] for i in range(vector.rows)]
+    # a derivative by an absent variable is zero (by name: SymEngine's == is slow)
+    present = [{symbol.name for symbol in entry.free_symbols} for entry in entries]
+    names = [x.name for x in variables]
     return se.DenseMatrix(vector.rows, len(variables),
-                          [se.diff(vector[i], x) for i in range(vector.rows) for x in variables])
+                          [se.diff(entry, x) if name in free else zero
+                           for entry, free in zip(entries, present) for x, name in zip(variables, names)])
 
 
 def _vee(skew: se.DenseMatrix) -> list:
@@ -273,7 +280,7 @@ def _weigh(weight, matrix: se.DenseMatrix) -> se.DenseMatrix:
 
 
 class _Accumulator:
-    """Sums the body terms ``J^T W J`` of M together with ``Md`` and ``T2``.
+    """Sums the body terms ``J^T W J`` of M, ``C qd``, and on demand ``Md`` and ``T2``.
 
     A scalar weight (a mass or a planar inertia) is kept apart from the term it
     multiplies, and terms that coincide are merged at the end: in a serial
@@ -288,6 +295,10 @@ class _Accumulator:
         self.mass_rate_terms: dict[tuple[int, int], list] = defaultdict(list)
         self.second_terms: dict[tuple[int, int], list] = defaultdict(list)
         self.velocity_terms: dict[tuple[int, int], list] = defaultdict(list)
+        self.pending: list[tuple] = []  # the body terms whose Md and T2 terms are not summed yet
+        self.products: dict[tuple, se.Basic | None] = {}  # column dot products, None if zero (_add_gram)
+        self.interned: dict[se.Basic, se.Basic] = {}
+        self._coriolis: tuple[se.DenseMatrix, se.DenseMatrix] | None = None
 
     def add(self, term: KineticTerm) -> None:
         """Add ``J^T W J`` of a body's kinetic-energy term; ``W`` is a scalar or a symmetric square matrix.
@@ -295,7 +306,8 @@ class _Accumulator:
         The term's velocity gives ``J``, ``Jd qd`` (a column, the rows of ``J``; from
         :class:`_AlongSpeeds`) and whether ``J`` is the Jacobian of a position or an angle (its
         columns' derivatives are symmetric, ``dJ_i/dq_k = dJ_k/dq_i``); it is not for the
-        angular-velocity Jacobian of a spatial body.
+        angular-velocity Jacobian of a spatial body.  ``M`` and ``C qd`` are summed now, the
+        terms of ``Md`` and ``T2`` (only ``C`` needs them) when first asked (:meth:`coriolis`).
         """
         jacobian, weight, bias = term.velocity.jacobian, term.weight, term.velocity.bias
         rows = range(jacobian.rows)
@@ -306,17 +318,8 @@ class _Accumulator:
         jacobian = se.DenseMatrix(jacobian.rows, len(support), [jacobian[r, k] for r in rows for k in support])
         qd = se.DenseMatrix(len(support), 1, [self.qd[k] for k in support])
         weighted = _weigh(weight, jacobian)  # W J, so J^T W = weighted^T
-        _scatter(self.mass_terms, factor, support, support, weighted.T * jacobian, symmetric=True)
-        symbols = set().union(*(entry.free_symbols for entry in jacobian))
-        derivatives = {k: jacobian.diff(qk) for k, qk in enumerate(self.q) if qk in symbols}
-        if not derivatives:
-            return
-        jacobian_dot = se.zeros(jacobian.rows, len(support))
-        for k, derivative in derivatives.items():
-            jacobian_dot += derivative * self.qd[k]
-        cross = weighted.T * jacobian_dot  # X = J^T W Jd, Md = X + X^T
-        _scatter(self.mass_rate_terms, factor, support, support, cross + cross.T, symmetric=True)
-        weighted_velocity = (weighted * qd).T  # (W v)^T
+        self._add_gram(factor, support, weighted, jacobian)
+        self.pending.append((weight, factor, support, jacobian, weighted, qd))
         # Velocity terms C qd = Md qd - dT/dq of this body: J^T W (Jd qd) + [(Jd_i - dJ/dq_i qd) . W v]_i;
         # for a gradient J the bracket vanishes (Jd_i = dJ/dq_i qd).  For the body-frame angular
         # velocity omega = J qd of a rigid body (W its central inertia) the bracket is Euler's
@@ -329,6 +332,41 @@ class _Accumulator:
                                                omega[2] * spin[0] - omega[0] * spin[2],
                                                omega[0] * spin[1] - omega[1] * spin[0]])
             _scatter(self.velocity_terms, factor, support, [0], jacobian.T * gyroscopic)
+
+    def _add_gram(self, factor, support: list, weighted: se.DenseMatrix, jacobian: se.DenseMatrix) -> None:
+        """The upper triangle of ``weighted^T jacobian`` (``J^T W J``) into the terms of ``M``, each
+        entry a dot product of two columns, memoized by the columns: in a chain the bodies beyond a
+        joint share the columns of the joints before it (absolute angles: the same expressions), so
+        most of the n^3 / 3 products of the bodies' terms are computed once."""
+        rows, intern = range(jacobian.rows), self.interned.setdefault
+        # equal entries made one object: a tuple compares them by identity first (SymEngine's == is slow)
+        columns = [tuple(intern(jacobian[r, b], jacobian[r, b]) for r in rows) for b in range(len(support))]
+        weighted_columns = columns if weighted is jacobian else [
+            tuple(intern(weighted[r, a], weighted[r, a]) for r in rows) for a in range(len(support))]
+        for a, (i, left) in enumerate(zip(support, weighted_columns)):
+            for j, right in zip(support[a:], columns[a:]):
+                key = (left, right)
+                if key in self.products:
+                    entry = self.products[key]
+                else:
+                    entry = se.Add(*(x * y for x, y in zip(left, right)))
+                    entry = self.products[key] = None if entry.is_zero else entry
+                if entry is not None:
+                    self.mass_terms[(i, j)].append((factor, entry))
+
+    def _add_coriolis(self, weight, factor, support: list, jacobian: se.DenseMatrix, weighted: se.DenseMatrix,
+                      qd: se.DenseMatrix) -> None:
+        """The terms of ``Md`` and ``T2`` of one body term (Theorems 1 and 2)."""
+        symbols = set().union(*(entry.free_symbols for entry in jacobian))
+        derivatives = {k: jacobian.diff(qk) for k, qk in enumerate(self.q) if qk in symbols}
+        if not derivatives:
+            return
+        jacobian_dot = se.zeros(jacobian.rows, len(support))
+        for k, derivative in derivatives.items():
+            jacobian_dot += derivative * self.qd[k]
+        cross = weighted.T * jacobian_dot  # X = J^T W Jd, Md = X + X^T
+        _scatter(self.mass_rate_terms, factor, support, support, cross + cross.T, symmetric=True)
+        weighted_velocity = (weighted * qd).T  # (W v)^T
         for i, derivative in derivatives.items():
             _scatter(self.second_terms, factor, [i], support, weighted_velocity * derivative)
             _scatter(self.second_terms, factor, [i], support, _weigh(weight, derivative * qd).T * jacobian)
@@ -341,12 +379,21 @@ class _Accumulator:
                 matrix[j, i] = matrix[i, j]
         return matrix
 
-    def matrices(self) -> tuple[se.DenseMatrix, se.DenseMatrix, se.DenseMatrix, se.DenseMatrix]:
-        """``(M, Md, T2, C qd)``."""
-        m = len(self.q)
-        return (self._sum(self.mass_terms, columns=m, symmetric=True),
-                self._sum(self.mass_rate_terms, columns=m, symmetric=True),
-                self._sum(self.second_terms, columns=m), self._sum(self.velocity_terms, columns=1))
+    def mass_and_velocity_terms(self) -> tuple[se.DenseMatrix, se.DenseMatrix]:
+        """``(M, C qd)``."""
+        return (self._sum(self.mass_terms, columns=len(self.q), symmetric=True),
+                self._sum(self.velocity_terms, columns=1))
+
+    def coriolis(self) -> tuple[se.DenseMatrix, se.DenseMatrix]:
+        """``(Md, T2)``, computed on the first call."""
+        if self._coriolis is None:
+            for record in self.pending:
+                self._add_coriolis(*record)
+            self.pending.clear()
+            m = len(self.q)
+            self._coriolis = (self._sum(self.mass_rate_terms, columns=m, symmetric=True),
+                              self._sum(self.second_terms, columns=m))
+        return self._coriolis
 
 
 def _scatter(terms: dict, factor, rows: list, cols: list, block: se.DenseMatrix, *,
@@ -443,35 +490,61 @@ def derive(system: System, *, simplify: bool | str | Callable = False) -> Equati
     nonholonomic_offset = se.DenseMatrix(len(velocity_constraints), 1,
                                          [h.subs(zero_speeds) for h in velocity_constraints])
 
-    mass_matrix, mass_rate, second, velocity_terms = accumulator.matrices()
-    coriolis = mass_rate - second / 2
-
-    simplifier = _simplifier(simplify)
+    mass_matrix, velocity_terms = accumulator.mass_and_velocity_terms()
+    r, s = len(system.constraints), len(velocity_constraints)
+    native = {"M": mass_matrix, "Cqd": velocity_terms, "g": g, "Phi": constraints, "Phi_q": constraint_jacobian,
+              "A": nonholonomic_matrix, "b": nonholonomic_offset, "f_Q": generalized_force,
+              "potential_energy": se.DenseMatrix(1, 1, [potential])}
     converter = _SympyConverter({symbol.name: symbol for symbol in (
         *system.coordinates, *system.speeds, *system.parameters, t)})
+    source = _DerivedMatrices(native, (m, r, s), accumulator, converter, _simplifier(simplify),
+                              (q, qd, se.Symbol(t.name)))
+    return Equations(system=system, time=t, source=source)
 
-    def public(matrix: se.DenseMatrix, rows: int = m, cols: int = m) -> sp.ImmutableMatrix:
-        converted = converter.matrix(matrix, (rows, cols))
-        return converted.applyfunc(simplifier) if simplifier else converted
 
-    def christoffel() -> sp.ImmutableMatrix:
-        # Converted on first access: the Christoffel form is as large as C and
-        # most uses (simulation) never need it.
-        return public((mass_rate + second.T - second) / 2)
+class _DerivedMatrices:
+    """The :class:`~kronlag.symbolic.equations.MatrixSource` of :func:`derive`: its SymEngine matrices,
+    converted to SymPy (and simplified, if asked) on first access; ``C`` and ``C_christoffel`` are
+    computed on first access too (:meth:`_Accumulator.coriolis`).  Simplified equations give the
+    numeric model no SymEngine form: its kernels then read the simplified SymPy matrices."""
 
-    potential_expr = converter(potential)
-    return Equations(
-        system=system,
-        M=public(mass_matrix),
-        C=public(coriolis),
-        Cqd=public(velocity_terms, m, 1),
-        christoffel_source=christoffel,
-        g=public(g, m, 1),
-        Phi=public(constraints, len(system.constraints), 1),
-        Phi_q=public(constraint_jacobian, len(system.constraints), m),
-        A=public(nonholonomic_matrix, len(velocity_constraints), m),
-        b=public(nonholonomic_offset, len(velocity_constraints), 1),
-        f_Q=public(generalized_force, m, 1),
-        potential_energy=simplifier(potential_expr) if simplifier else potential_expr,
-        time=t,
-    )
+    _SCALARS = ("potential_energy",)
+
+    def __init__(self, native: dict[str, se.DenseMatrix], shape: tuple[int, int, int], accumulator: _Accumulator,
+                 converter: _SympyConverter, simplifier: Callable[[sp.Expr], sp.Expr] | None,
+                 variables: tuple[list, list, se.Symbol]):
+        self.native, self.shape, self.accumulator = native, shape, accumulator
+        self.converter, self.simplifier = converter, simplifier
+        self.coordinates, self.speeds, self.time = variables
+
+    def _native(self, name: str) -> se.DenseMatrix | None:
+        if name in self.native:
+            return self.native[name]
+        if name in ("C", "C_christoffel"):
+            mass_rate, second = self.accumulator.coriolis()
+            self.native["C"] = mass_rate - second / 2
+            self.native["C_christoffel"] = (mass_rate + second.T - second) / 2
+            return self.native[name]
+        if name == "Phi_t":
+            self.native[name] = self.native["Phi"].diff(self.time) if self.shape[1] else se.zeros(0, 1)
+        elif name in ("gamma", "gamma_nh"):
+            jacobian, offset = (self._native("Phi_q"), self._native("Phi_t")) if name == "gamma" else (
+                self.native["A"], self.native["b"])
+            self.native[name] = acceleration_offset(jacobian, offset, self.coordinates, self.speeds, self.time)
+        else:
+            return None
+        return self.native[name]
+
+    def symengine(self, name: str) -> se.DenseMatrix | None:
+        return None if self.simplifier else self._native(name)
+
+    def sympy(self, name: str):
+        matrix = self._native(name)
+        if name in self._SCALARS:
+            converted = self.converter(matrix[0, 0])
+            return self.simplifier(converted) if self.simplifier else converted
+        m, r, s = self.shape
+        rows = {"Phi": r, "Phi_q": r, "A": s, "b": s}.get(name, m)
+        columns = 1 if name in VECTORS else m
+        converted = self.converter.matrix(matrix, (rows, columns))
+        return converted.applyfunc(self.simplifier) if self.simplifier else converted

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import cached_property, partial
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import symengine as se
 import sympy as sp
@@ -18,10 +18,65 @@ from .calculus import matrix_derivative
 if TYPE_CHECKING:
     from ..model.system import System
 
-__all__ = ["Equations", "MATRIX_NAMES"]
+__all__ = ["Equations", "MATRIX_NAMES", "MatrixSource", "StoredMatrices", "acceleration_offset"]
 
 #: The matrices printed with the equations, in order (:data:`kronlag.symbolic.matrices.PRINTED`).
 MATRIX_NAMES = catalogue.PRINTED
+#: What a :class:`MatrixSource` gives: the stored matrices of the catalogue and the potential energy.
+_STORED_NAMES = (*catalogue.STORED, "potential_energy")
+
+
+class MatrixSource(Protocol):
+    """Where an :class:`Equations` object takes its matrices from, on first access."""
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(m, r, s)``."""
+
+    def sympy(self, name: str) -> Any:
+        """Matrix ``name`` of :data:`_STORED_NAMES` or ``"C_christoffel"`` in SymPy."""
+
+    def symengine(self, name: str) -> se.DenseMatrix | None:
+        """Matrix ``name`` in SymEngine (symbols named as the system's), or None."""
+
+
+class StoredMatrices:
+    """A :class:`MatrixSource` of SymPy matrices held (or computed by ``deferred`` callables on first use)."""
+
+    def __init__(self, matrices: dict[str, Any], *, deferred: dict[str, Callable[[], Any]] | None = None):
+        self.matrices, self.deferred = matrices, dict(deferred or {})
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.matrices["M"].rows, self.matrices["Phi"].rows, self.matrices["A"].rows
+
+    def sympy(self, name: str) -> Any:
+        return self.matrices[name] if name in self.matrices else self.deferred[name]()
+
+    def symengine(self, name: str) -> None:
+        return None
+
+
+def _stored(name: str, doc: str) -> cached_property:
+    """The attribute ``name`` of :class:`Equations`: its source's matrix, converted once."""
+    def convert(self: Equations) -> Any:
+        return self.source.sympy(name)
+
+    convert.__name__, convert.__doc__ = name, doc
+    return cached_property(convert)
+
+
+def acceleration_offset(jacobian: se.DenseMatrix, offset: se.DenseMatrix, coordinates: list, speeds: list,
+                        time: se.Symbol) -> se.DenseMatrix:
+    """``-d/dt (jacobian qd + offset)`` at fixed ``qd`` (column): Theorem 1 for q, plus the partial in t,
+    in SymEngine (``gamma`` from ``Phi_q`` and ``Phi_t``, ``gamma_nh`` from ``A`` and ``b``)."""
+    rows = offset.rows
+    if not rows:
+        return se.zeros(0, 1)
+    velocity = jacobian * se.DenseMatrix(len(speeds), 1, speeds) + offset
+    return se.DenseMatrix(rows, 1, [-se.Add(se.diff(entry, time), *(se.diff(entry, q) * qd
+                                                                     for q, qd in zip(coordinates, speeds)))
+                                    for entry in velocity])
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,7 +87,9 @@ class Equations:
         f(q) = 0,   A(q) qd + b(q) = 0
 
     with m coordinates, r holonomic and s nonholonomic constraints.  All
-    matrices are immutable SymPy matrices.
+    matrices are immutable SymPy matrices, each converted from the derivation's SymEngine form
+    on first access (``source``, a :class:`MatrixSource`): the numeric model reads the SymEngine
+    form and never needs them (:meth:`symengine`).
 
     Attributes
     ----------
@@ -72,23 +129,27 @@ class Equations:
     """
 
     system: System
-    M: sp.ImmutableMatrix
-    C: sp.ImmutableMatrix
-    Cqd: sp.ImmutableMatrix
-    g: sp.ImmutableMatrix
-    Phi: sp.ImmutableMatrix
-    Phi_q: sp.ImmutableMatrix
-    A: sp.ImmutableMatrix
-    b: sp.ImmutableMatrix
-    f_Q: sp.ImmutableMatrix
-    potential_energy: sp.Expr
     time: sp.Symbol
-    christoffel_source: Callable[[], sp.ImmutableMatrix] = field(repr=False)
+    source: MatrixSource = field(repr=False)
 
-    @cached_property
-    def C_christoffel(self) -> sp.ImmutableMatrix:
-        """Christoffel-symbol form of the Coriolis matrix, shape (m, m); see the class docstring."""
-        return self.christoffel_source()
+    M = _stored("M", "Mass matrix (m, m), Eq. 12.")
+    C = _stored("C", "Coriolis/centripetal matrix (m, m) of Eq. 22.")
+    Cqd = _stored("Cqd", "``C qd`` (m, 1), summed body by body.")
+    g = _stored("g", "``(dPi/dq)^T`` (m, 1).")
+    Phi = _stored("Phi", "Holonomic constraints ``f(q)`` (r, 1).")
+    Phi_q = _stored("Phi_q", "Constraint Jacobian ``df/dq`` (r, m).")
+    A = _stored("A", "Nonholonomic constraint matrix (s, m).")
+    b = _stored("b", "Nonholonomic constraint offset (s, 1): ``A qd + b = 0``.")
+    f_Q = _stored("f_Q", "Generalized non-conservative forces (m, 1).")
+    potential_energy = _stored("potential_energy", "``Pi(q)``.")
+    C_christoffel = _stored("C_christoffel", "Christoffel-symbol form of the Coriolis matrix, shape (m, m); "
+                            "see the class docstring.")
+
+    def symengine(self, name: str) -> se.DenseMatrix | None:
+        """Matrix ``name`` as the derivation left it in SymEngine (symbols named as the system's),
+        or None when there is no such form (equations simplified, substituted or unpickled, or a
+        matrix computed here): the numeric model's kernels read it without a round trip through SymPy."""
+        return self.source.symengine(name)
 
     # -- symbols --------------------------------------------------------------
 
@@ -125,7 +186,7 @@ class Equations:
     @property
     def shape(self) -> tuple[int, int, int]:
         """``(m, r, s)``: coordinates, holonomic and nonholonomic constraints."""
-        return self.M.rows, self.Phi.rows, self.A.rows
+        return self.source.shape
 
     # -- derived matrices -------------------------------------------------------
 
@@ -174,20 +235,14 @@ class Equations:
         return self._acceleration_offset(self.A, self.b)
 
     def _acceleration_offset(self, jacobian: sp.MatrixBase, offset: sp.MatrixBase) -> sp.ImmutableMatrix:
-        """``-d/dt (jacobian qd + offset)`` at fixed ``qd``: Theorem 1 for q, plus the partial in t."""
+        """-d/dt (jacobian qd + offset) at fixed ``qd`` (:func:`acceleration_offset`)."""
         # differentiated in SymEngine: SymPy's diff of the velocity of closed_chain(30, "relative")
         # takes 25 s, SymEngine's 0.1 s (and 0.2 s back to SymPy)
-        velocity = jacobian * sp.Matrix(self.speeds) + offset
-        coordinates = [se.sympify(q) for q in self.coordinates]
-        speeds = [se.sympify(qd) for qd in self.speeds]
-        time = se.sympify(self.time)
-
-        def rate(entry: sp.Expr) -> sp.Expr:
-            entry = se.sympify(entry)
-            return se.Add(se.diff(entry, time),
-                          *(se.diff(entry, q) * qd for q, qd in zip(coordinates, speeds)))._sympy_()
-
-        return sp.ImmutableMatrix(velocity.rows, velocity.cols, lambda i, j: -rate(velocity[i, j]))
+        native = acceleration_offset(se.DenseMatrix(jacobian.rows, jacobian.cols, [se.sympify(e) for e in jacobian]),
+                                     se.DenseMatrix(offset.rows, 1, [se.sympify(e) for e in offset]),
+                                     [se.sympify(q) for q in self.coordinates], [se.sympify(v) for v in self.speeds],
+                                     se.sympify(self.time))
+        return sp.ImmutableMatrix(offset.rows, 1, [entry._sympy_() for entry in native])
 
     @cached_property
     def kinetic_energy(self) -> sp.Expr:
@@ -226,10 +281,9 @@ class Equations:
         return self._transformed(lambda item: item.subs(mapping))
 
     def _transformed(self, transform: Callable) -> Equations:
-        changes: dict[str, Any] = {name: transform(getattr(self, name)) for name in catalogue.STORED}
-        changes["potential_energy"] = transform(self.potential_energy)
-        changes["christoffel_source"] = lambda: transform(self.C_christoffel)
-        return replace(self, **changes)
+        matrices: dict[str, Any] = {name: transform(getattr(self, name)) for name in _STORED_NAMES}
+        source = StoredMatrices(matrices, deferred={"C_christoffel": lambda: transform(self.C_christoffel)})
+        return Equations(system=self.system, time=self.time, source=source)
 
     # -- numerics ---------------------------------------------------------------
 
@@ -286,13 +340,16 @@ class Equations:
     # -- pickling ---------------------------------------------------------------
 
     def __getstate__(self) -> dict[str, Any]:
-        """The fields and cached matrices; ``christoffel_source`` (a closure) becomes a picklable
-        callable: the matrix itself when already computed, else its Christoffel-symbol formula."""
+        """The fields and cached matrices, with the source as SymPy matrices (converted now if not
+        yet): the Christoffel form as the matrix when already computed, else its formula."""
         state = dict(self.__dict__)
+        matrices = {name: getattr(self, name) for name in _STORED_NAMES}
         if "C_christoffel" in state:
-            state["christoffel_source"] = partial(sp.ImmutableMatrix, state["C_christoffel"])
+            matrices["C_christoffel"] = state["C_christoffel"]
+            deferred = {}
         else:
-            state["christoffel_source"] = partial(christoffel_matrix, self.M, self.coordinates, self.speeds)
+            deferred = {"C_christoffel": partial(christoffel_matrix, self.M, self.coordinates, self.speeds)}
+        state["source"] = StoredMatrices(matrices, deferred=deferred)
         return state
 
     def __str__(self) -> str:

@@ -44,7 +44,7 @@ system (``kronlag_forward_dynamics``, ``numeric/codegen/c/augmented.c``).
 from ...core.errors import CompilerError
 from ...core.kernels import Block, Kernel, literal, python_source
 from .build import (C_LARGE_SOURCE, KEY_FUNCTION, CCompiler, c_compiler, cache_directory,
-                    compile_shared_library, load_shared_library)
+                    compile_shared_library, library_parts, load_shared_library)
 from .c_backend import FAST_CALL, CLibrary, batch_threads, c_file, c_kernel, solver_header
 from .layouts import LAYOUTS, dynamics_shape, layout, layout_macros
 from .python_backend import KernelLibrary, PythonLibrary
@@ -71,6 +71,7 @@ __all__ = [
     "cache_directory",
     "compile_shared_library",
     "load_shared_library",
+    "library_parts",
     "KEY_FUNCTION",
     "batch_threads",
     "literal",

@@ -10,6 +10,7 @@ import hashlib
 import importlib
 import importlib.metadata
 import os
+import re
 import shlex
 import shutil
 import stat
@@ -24,7 +25,7 @@ from pathlib import Path
 from ...core.errors import CacheWarning, CompilerError, CompilerWarning
 
 __all__ = ["CCompiler", "c_compiler", "cache_directory", "compile_shared_library", "load_shared_library",
-           "C_LARGE_SOURCE", "KEY_FUNCTION"]
+           "library_parts", "C_LARGE_SOURCE", "KEY_FUNCTION"]
 
 #: The function every compiled library exports, ``const char *kronlag_library_key(void)``: the key in
 #: its file name, checked after loading (a library is bound to the source it was built from).
@@ -37,7 +38,7 @@ _OPTIMIZATION = "-O2"
 #: KRONLAG_WIDE_LOOPS adds AVX2 clones of them (``numeric/codegen/c/linalg.c``); closed_chain(40): 10.4 us
 #: at -O2, 6.7 us so.
 _SOLVER_FLAGS = ("-O3", "-DKRONLAG_WIDE_LOOPS")
-#: Sources longer than this (characters) compile their kernel chunks with :data:`_LARGE_KERNEL_OPTIMIZATION`:
+#: Kernel chunks longer than this (characters, outside part 0) compile with :data:`_LARGE_KERNEL_OPTIMIZATION`:
 #: on straight-line generated code GCC's -O2 takes 1.6 times as long as -O1 and buys nothing
 #: (closed_chain(30, "relative"): 13 s against 8 s, the kernel 15.5 us either way).
 C_LARGE_SOURCE = 100_000
@@ -317,21 +318,21 @@ def _build_plan(source: str, parts: int, libraries: tuple[Path, ...] = ()) -> tu
     if compiler is None:
         raise CompilerError(f"the C backend needs a working C compiler ({failures}); "
                             "use backend='python'")
-    kernel_level = _LARGE_KERNEL_OPTIMIZATION if len(source) > C_LARGE_SOURCE else _OPTIMIZATION
+    kernel_level = _LARGE_KERNEL_OPTIMIZATION if _kernel_characters(source) > C_LARGE_SOURCE else _OPTIMIZATION
     levels = [_SOLVER_FLAGS] + [(kernel_level,)] * (parts - 1) if parts > 1 else [(_OPTIMIZATION,)]
     facts = (compiler.identity, *_CFLAGS, *map(" ".join, levels), source, *(f"link {path}" for path in libraries))
     key = hashlib.sha256("\0".join(facts).encode()).hexdigest()[:32]
     return compiler, levels, key
 
 
-def compile_shared_library(source: str, *, parts: int = 1, libraries: tuple[Path, ...] = ()) -> Path:
+def compile_shared_library(source: str, *, parts: int | None = None, libraries: tuple[Path, ...] = ()) -> Path:
     """Compile C ``source`` into a shared library in :func:`cache_directory` (reused when intact).
 
-    With ``parts > 1`` the source is compiled ``parts`` times in parallel with
+    ``parts`` defaults to :func:`library_parts`.  With ``parts > 1`` the source is compiled ``parts`` times in parallel with
     ``-DKRONLAG_PART=i -DKRONLAG_PARTS=parts`` (each keeps the chunks
     ``KRONLAG_IN_PART`` selects) and the objects are linked; part 0, the
     hand-written C, with :data:`_SOLVER_FLAGS` (``-O3``), the others, the generated
-    kernel chunks, at ``-O2``, or ``-O1`` when the source is longer than
+    kernel chunks, at ``-O2``, or ``-O1`` when they are longer than
     :data:`C_LARGE_SOURCE` characters.  A single part is compiled at ``-O2``.  The library
     exports ``const char *kronlag_library_key(void)`` (:data:`KEY_FUNCTION`) returning its key,
     the hash of the source and the flags in its name (``kronlag_<key>.so``), which
@@ -346,12 +347,12 @@ def compile_shared_library(source: str, *, parts: int = 1, libraries: tuple[Path
     CompilerError
         No compiler, or it failed.
     """
-    compiler, levels, key = _build_plan(source, parts, libraries)
+    compiler, levels, key = _build_plan(source, library_parts(source) if parts is None else parts, libraries)
     target = _private_cache_directory() / f"kronlag_{key}.so"
     return target if _intact(target) else _build(compiler, levels, _keyed_source(source, key), target, libraries)
 
 
-def load_shared_library(source: str, *, parts: int = 1, libraries: tuple[Path, ...] = ()) -> ctypes.CDLL:
+def load_shared_library(source: str, *, parts: int | None = None, libraries: tuple[Path, ...] = ()) -> ctypes.CDLL:
     """:func:`compile_shared_library`, loaded with :mod:`ctypes` and checked to be the library of
     ``source``: one whose key does not match (the files of two models swapped, a truncated or
     foreign file) is rebuilt; if the rebuilt one does not match either, a :class:`CacheWarning`
@@ -362,7 +363,7 @@ def load_shared_library(source: str, *, parts: int = 1, libraries: tuple[Path, .
     CompilerError
         No compiler, it failed, or not even the library built privately carries the key.
     """
-    compiler, levels, key = _build_plan(source, parts, libraries)
+    compiler, levels, key = _build_plan(source, library_parts(source) if parts is None else parts, libraries)
     source = _keyed_source(source, key)
     directory = _private_cache_directory()
     target = directory / f"kronlag_{key}.so"
@@ -404,29 +405,94 @@ def _load_keyed(path: Path, key: str) -> ctypes.CDLL | None:
     return None
 
 
+#: The guards of generated kernel chunks, ``KRONLAG_IN_PART(<chunk>)`` (:func:`library_parts`).
+_CHUNK_GUARD = re.compile(r"KRONLAG_IN_PART\((\d+)\)")
+#: Most parts a library is compiled in (one compiler process each).
+_MAX_PARTS = 8
+
+
+def library_parts(source: str) -> int:
+    """The number of parts a generated ``source`` is compiled in: part 0 (the hand-written C) and one
+    per core for its kernel chunks (the guards ``KRONLAG_IN_PART(c)``, ``c >= 1``), at most
+    :data:`_MAX_PARTS`.  A library that appends code to another's source (a driver) gets the same
+    parts, so that its kernel parts are the same objects (:func:`_build` reuses them)."""
+    chunks = max((int(chunk) for chunk in _CHUNK_GUARD.findall(source)), default=0)
+    return 1 + min(chunks, os.cpu_count() or 1, _MAX_PARTS - 1)
+
+
+#: A kernel chunk: its guard and its code.
+_CHUNK = re.compile(r"^#if KRONLAG_IN_PART\(([1-9]\d*)\)\n(.*?)^#endif", re.DOTALL | re.MULTILINE)
+
+
+def _kernel_characters(source: str) -> int:
+    """The length of the kernel chunks of ``source`` outside part 0 (what decides their optimization
+    level: a driver appended to a model's source keeps the level, and so the objects, of its kernel parts)."""
+    return sum(len(match.group(2)) for match in _CHUNK.finditer(source))
+
+
+def _object_key(compiler: CCompiler, level: tuple[str, ...], preprocessed: bytes) -> str:
+    return hashlib.sha256("\0".join((compiler.identity, *_CFLAGS, *level)).encode() + b"\0" + preprocessed).hexdigest()[:32]
+
+
+def _compile_parts(compiler: CCompiler, levels: list[tuple[str, ...]], source_path: Path, work: Path,
+                   cache: Path) -> list[Path]:
+    """The objects of the parts of ``source_path``, compiled in parallel; a part compiled in parts is
+    preprocessed first and its object reused from ``cache`` when the same compiler and flags compiled
+    the same preprocessed text before (the kernel parts of a model, again in a driver's library)."""
+    parts = len(levels)
+    defines = [(f"-DKRONLAG_PART={i}", f"-DKRONLAG_PARTS={parts}") if parts > 1 else () for i in range(parts)]
+    objects = [work / f"part{i}.o" for i in range(parts)]
+    # part 0 (the hand-written C, and the library's key) directly; the kernel parts preprocessed first
+    inputs: list[tuple[tuple[str, ...], Path, Path, Path | None]] = [((*levels[0], *defines[0]), source_path,
+                                                                      objects[0], None)]
+    preprocessing = [(i, work / f"part{i}.i") for i in range(1, parts)]
+    try:
+        steps = [subprocess.Popen([*compiler.command, *levels[i], *defines[i], *_CFLAGS, *compiler.flags, "-E", "-P",
+                                   "-o", str(path), str(source_path)],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                 for i, path in preprocessing]
+    except OSError as error:
+        raise CompilerError(f"cannot run the C compiler {compiler}: {error}") from None
+    for (i, path), step in zip(preprocessing, steps):
+        error = step.communicate()[1]
+        if step.returncode:
+            raise CompilerError(f"preprocessing the generated C code with {compiler} failed: exit status "
+                                f"{step.returncode}\n{error[-4000:]}".rstrip())
+        cached = cache / f"kronlag_part_{_object_key(compiler, levels[i], path.read_bytes())}.o"
+        if _intact(cached):
+            objects[i] = cached
+        else:
+            inputs.append(((*levels[i], *defines[i]), path, objects[i], cached))
+    try:
+        processes = [subprocess.Popen(_compile_command(compiler, flags, path, obj),
+                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                     for flags, path, obj, _ in inputs]
+    except OSError as error:
+        raise CompilerError(f"cannot run the C compiler {compiler}: {error}") from None
+    errors = [process.communicate()[1] for process in processes]
+    failed = [f"exit status {process.returncode}\n{error[-4000:]}"
+              for process, error in zip(processes, errors) if process.returncode]
+    if failed:
+        raise CompilerError(f"compiling the generated C code with {compiler} failed: {failed[0]}".rstrip())
+    for _, _, obj, cached in inputs:
+        if cached is not None:  # the object first, its hash after (as a library)
+            shutil.copyfile(obj, work / "object.part")
+            os.replace(work / "object.part", cached)
+            _write_atomically(_digest_path(cached), _digest(cached).encode(), work)
+    return objects
+
+
 def _build(compiler: CCompiler, levels: list[tuple[str, ...]], source: str, target: Path,
            libraries: tuple[Path, ...] = ()) -> Path:
-    """Compile ``source`` (in parts, one per entry of ``levels``) into ``target`` linked with the shared
-    ``libraries``, then write its digest."""
-    parts = len(levels)
+    """Compile ``source`` (in parts, one per entry of ``levels``; :func:`_compile_parts`) into ``target``
+    linked with the shared ``libraries``, then write its digest."""
     with tempfile.TemporaryDirectory(dir=target.parent) as work:
         source_path = Path(work) / "model.c"
         source_path.write_text(source)
-        objects = [Path(work) / f"part{i}.o" for i in range(parts)]
-        defines = [(f"-DKRONLAG_PART={i}", f"-DKRONLAG_PARTS={parts}") if parts > 1 else () for i in range(parts)]
-        try:
-            processes = [subprocess.Popen(_compile_command(compiler, (*level, *define), source_path, obj),
-                                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-                         for level, define, obj in zip(levels, defines, objects)]
-        except OSError as error:
-            raise CompilerError(f"cannot run the C compiler {compiler}: {error}") from None
-        errors = [process.communicate()[1] for process in processes]
-        failed = [f"exit status {process.returncode}\n{error[-4000:]}"
-                  for process, error in zip(processes, errors) if process.returncode]
+        objects = _compile_parts(compiler, levels, source_path, Path(work), target.parent)
         built = Path(work) / "model.so"
-        if not failed:
-            link = subprocess.run(_link_command(compiler, objects, built, libraries), capture_output=True, text=True)
-            failed = [f"exit status {link.returncode} (linking)\n{link.stderr[-4000:]}"] if link.returncode else []
+        link = subprocess.run(_link_command(compiler, objects, built, libraries), capture_output=True, text=True)
+        failed = [f"exit status {link.returncode} (linking)\n{link.stderr[-4000:]}"] if link.returncode else []
         if failed or not built.is_file():
             output = failed[0] if failed else "no library was written"
             raise CompilerError(f"compiling the generated C code with {compiler} failed: {output}".rstrip())
@@ -435,4 +501,3 @@ def _build(compiler: CCompiler, levels: list[tuple[str, ...]], source: str, targ
         os.replace(built, target)
         _write_atomically(_digest_path(target), digest.encode(), Path(work))
     return target
-

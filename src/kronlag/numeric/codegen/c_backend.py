@@ -16,7 +16,7 @@ import symengine as se
 from ...core.kernels import PLACEHOLDER, Kernel, literal
 from ...model.friction import record_size
 from ..tolerances import RANK_RTOL, c_macros
-from .build import load_shared_library
+from .build import library_parts, load_shared_library
 from .layouts import dynamics_shape, layout_macros
 from .python_backend import _vector
 
@@ -78,8 +78,8 @@ def c_kernel(kernel: Kernel, first_chunk: int) -> tuple[str, int]:
 
     The temporaries live in a workspace ``w``; the statements are split into
     functions of :data:`C_CHUNK` statements, chunk ``c`` guarded by
-    ``KRONLAG_IN_PART(first_chunk + c)`` so that parts compile in parallel.
-    Returns the code and the number of chunks.
+    ``KRONLAG_IN_PART(first_chunk + c)`` so that parts compile in parallel (``first_chunk`` 0: all
+    in part 0, with the hand-written C).  Returns the code and the number of chunks.
     """
     index = {symbol.name: i for i, (symbol, _) in enumerate(kernel.temporaries)}
 
@@ -94,9 +94,11 @@ def c_kernel(kernel: Kernel, first_chunk: int) -> tuple[str, int]:
     arguments = ("double t, const double *restrict q, const double *restrict qd, const double *restrict p, "
                  "double *restrict w, double *restrict out")
     names = [f"kronlag_{kernel.name}_{c}" for c in range(max(1, -(-len(statements) // C_CHUNK)))]
-    lines = [f"KRONLAG_INTERNAL void {name}({arguments});" for name in names]
+    # the declarations in part 0 only, where they are called: a kernel part holds its chunks alone,
+    # so that it is the same object in every library that contains it (build.library_parts)
+    lines = ["#if KRONLAG_IN_PART(0)", *(f"KRONLAG_INTERNAL void {name}({arguments});" for name in names), "#endif"]
     for c, name in enumerate(names):
-        lines += [f"#if KRONLAG_IN_PART({first_chunk + c})",
+        lines += [f"#if KRONLAG_IN_PART({first_chunk + c if first_chunk else 0})",
                   f"KRONLAG_INTERNAL void {name}({arguments})", "{",
                   "    (void)t; (void)q; (void)qd; (void)p; (void)w;"]
         lines += [f"    {statement}" for statement in statements[c * C_CHUNK:(c + 1) * C_CHUNK]]
@@ -161,7 +163,7 @@ class CLibrary:
             parts.append(c_file("linalg.c") + c_file("augmented.c") + c_file("forward_dynamics_batch.c") + "#endif\n")
         self.source = "\n".join(parts)
         # part 0 (the solver) is small: one process per core for the kernel chunks besides it
-        self.library = load_shared_library(self.source, parts=1 + min(chunks - 1, os.cpu_count() or 1, 8))
+        self.library = load_shared_library(self.source, parts=library_parts(self.source))
         self.functions = {}
         for name in self.kernels:
             function = getattr(self.library, f"kronlag_{name}")

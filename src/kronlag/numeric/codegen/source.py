@@ -58,6 +58,9 @@ class KernelSource:
         eq = self.equations
         if name not in matrices.MATRICES:
             raise KeyError(name)
+        native = eq.symengine(name) if name != "h" else None
+        if native is not None:  # the derivation's own SymEngine form: no round trip through SymPy
+            return self.convert.native_matrix(native, name)
         if name not in _COMPUTED:
             return self.convert.matrix(getattr(eq, name), name)
         if name == "potential_energy":
