@@ -114,9 +114,9 @@ def run_batches(task: Callable[[Sequence], Any], batches: Sequence[Sequence], *,
                 try:
                     succeeded, result = worker.connection.recv()
                 except (EOFError, OSError):  # the worker died in the batch
-                    code = worker.process.exitcode
                     worker.batch = None
-                    worker.stop(now=True)
+                    worker.stop(now=True)  # reaped: its exit code known (a dead process ignores the SIGTERM)
+                    code = worker.process.exitcode
                     pool[pool.index(worker)] = _Worker(context, task)
                     if attempt >= retries:
                         lost(batch, f"its worker died (exit code {code}) in each of {attempt + 1} attempts")

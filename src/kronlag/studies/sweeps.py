@@ -424,28 +424,22 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
         report(len(results), len(cases))
 
     try:
-        first = 0 if scheduler is None and workers == 0 else min(len(cases), 2)
+        local = usable_cpus() if workers is None else workers
+        first = 0 if scheduler is None and local == 0 else min(len(cases), 2)
         for index in range(first):  # in this process: their time estimates the rest
             finished(index, *_run_case(model_or_factory, cases[index], settings))
         rest = list(enumerate(cases))[first:]
         per_case = min((results[index][0]["wall_time"] for index in range(first)), default=0.0)
         if scheduler is not None:
             _run_distributed(model_or_factory, rest, settings, scheduler, per_case, batch_size, retries, finished)
-        elif rest and _pays_off(workers, per_case * len(rest)):
-            _run_local(model_or_factory, rest, settings, workers or usable_cpus(), per_case, batch_size, retries,
-                       finished)
+        elif rest and local > 1 and per_case * len(rest) >= PARALLEL_FROM_SECONDS:
+            _run_local(model_or_factory, rest, settings, local, per_case, batch_size, retries, finished)
         else:
             for index, values in rest:
                 finished(index, *_run_case(model_or_factory, values, settings))
     except KeyboardInterrupt:
         raise SweepInterrupted(SweepResult._of(cases, results, keep_trajectories), len(cases)) from None
     return SweepResult._of(cases, results, keep_trajectories)
-
-
-def _pays_off(workers: int | None, estimate: float) -> bool:
-    """Whether local worker processes finish the remaining cases, estimated at ``estimate`` seconds in this
-    process, sooner than this process alone."""
-    return (workers or usable_cpus()) > 1 and estimate >= PARALLEL_FROM_SECONDS
 
 
 def _batch_size(count: int, workers: int, per_case: float) -> int:
