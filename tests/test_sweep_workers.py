@@ -145,3 +145,14 @@ def test_cli_sweep_runs_on_the_scheduler_given(cluster, tmp_path, monkeypatch, c
     assert addresses == [cluster.scheduler_address]
     assert "3 cases, 3 ok" in capsys.readouterr().out
     assert output.read_text().count("\n") == 4
+
+
+@pytest.mark.slow
+def test_spawned_workers_give_the_same_results(model, pool_calls, monkeypatch):
+    """Where fork is not safe (threads running, macOS, Windows) the workers are started afresh."""
+    from kronlag.studies import local_pool
+
+    monkeypatch.setattr(local_pool, "start_method", lambda: "spawn")
+    spawned = run(model, workers=2)
+    assert pool_calls == [2]
+    assert without_wall_time(spawned).equals(without_wall_time(run(model, workers=0)))
