@@ -461,7 +461,7 @@ def _shipped(source, settings) -> tuple[str, bytes, bytes]:
     return hashlib.sha256(payload).hexdigest(), payload, cloudpickle.dumps(settings)
 
 
-def _lost(batch: list[tuple[int, dict]], message: str) -> list:
+def _lost(batch: Sequence[tuple[int, dict]], message: str) -> list:
     """The rows of the cases of a batch that could not be run."""
     return [(index, {"status": _STATUS_LOST, "message": message, "wall_time": float("nan")}, None)
             for index, _ in batch]
