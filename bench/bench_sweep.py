@@ -22,7 +22,7 @@ compared):
   the same cases: it must run in this process and cost no more;
 * with ``--dask``: the same sweep on a Dask ``LocalCluster`` of N workers started inside the timing.
 
-Also printed: the machine's load (``os.getloadavg``, 1 min) at the start of each block, and the time
+Also printed: the CPU time of each variant (this process's and its workers'), the machine's load (``os.getloadavg``, 1 min) at the start of each block, and the time
 a case takes in a worker and in this process, wall (the table's median ``wall_time``) and CPU (this
 process's CPU time, the workers' from ``RUSAGE_CHILDREN`` once they have exited), which tells a
 worker's own overhead (CPU) from its waiting for a core the other load holds (wall).
@@ -88,15 +88,17 @@ def main() -> None:
     example = load_example("four_bar", apply_drives=False)
     model = kronlag.derive(example.system).numeric(example.numeric_values())
     common = dict(initial_states=GUESS, fixed=["q1"], t_span=(0.0, arguments.t_end), t_eval=t_eval, progress=False)
-    plain_loop(model, cases[:2], arguments.t_end, t_eval)  # the driver library loaded
+    kronlag.sweep(model, parameters=cases[:2], workers=0, **common)  # the driver library and pandas loaded
 
     times: dict[str, list[float]] = {}
+    cpu_times: dict[str, list[float]] = {}
     loads, cpu, wall, agree = [], {"in-process": [], "worker": []}, {"in-process": [], "worker": []}, True
 
     def timed(name, run):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time() + children_cpu()
         result = run()
         times.setdefault(name, []).append(time.perf_counter() - start)
+        cpu_times.setdefault(name, []).append(time.process_time() + children_cpu() - start_cpu)
         return result
 
     workers = f"sweep, {arguments.workers} workers"
@@ -124,10 +126,10 @@ def main() -> None:
     print(f"four-bar sweep: {len(cases)} cases x {arguments.t_end:g} s simulated, {arguments.points} outputs each; "
           f"{arguments.blocks} blocks, medians; load (1 min) at the blocks' starts: "
           + ", ".join(f"{load:.2f}" for load in loads) + f" on {os.cpu_count()} CPUs")
-    print(f"{'variant':<36}{'median s':>10}{'ms/case':>10}")
+    print(f"{'variant':<36}{'median s':>10}{'ms/case':>10}{'CPU s':>10}")
     for name, seconds in median.items():
         count = len(small) if name.startswith("small") else len(cases)
-        print(f"{name:<36}{seconds:>10.3f}{1000 * seconds / count:>10.2f}")
+        print(f"{name:<36}{seconds:>10.3f}{1000 * seconds / count:>10.2f}{statistics.median(cpu_times[name]):>10.3f}")
     print("time in a case, median (ms): "
           + "; ".join(f"{where}: wall {1000 * statistics.median(wall[where]):.2f}, "
                       f"CPU {1000 * statistics.median(cpu[where]):.2f}" for where in ("in-process", "worker")))
