@@ -3,7 +3,9 @@ cluster (``scheduler=``), with the same results; small sweeps stay here; failure
 
 from __future__ import annotations
 
+import io
 import os
+import sys
 
 import numpy as np
 import pytest
@@ -156,3 +158,19 @@ def test_spawned_workers_give_the_same_results(model, pool_calls, monkeypatch):
     spawned = run(model, workers=2)
     assert pool_calls == [2]
     assert without_wall_time(spawned).equals(without_wall_time(run(model, workers=0)))
+
+
+class Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.mark.parametrize("progress", [True, False])
+def test_the_progress_bar_is_drawn_on_a_terminal_unless_switched_off(model, monkeypatch, capsys, progress):
+    run(model, workers=0)  # standard error is no terminal here (as in every test and doctest): no bar
+    assert capsys.readouterr().err == ""
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    sweep(model, parameters=CASES, initial_states=INITIAL, fixed=["q1"], t_span=(0.0, 1.0), workers=0,
+          progress=progress)
+    assert (f"] {len(CASES)}/{len(CASES)} cases" in terminal.getvalue()) is progress

@@ -311,7 +311,8 @@ def _check_names(source, cases: list[dict]) -> None:
 class _TextProgress:
     """``[#####.....] done/total cases`` on standard error (a terminal only), at most 10 redraws/s."""
 
-    def __init__(self, total: int, stream=sys.stderr, width: int = 30):
+    def __init__(self, total: int, stream=None, width: int = 30):
+        stream = sys.stderr if stream is None else stream  # the one of the time of the sweep
         self.total, self.stream, self.width, self.drawn = total, stream, width, 0.0
         self.enabled = hasattr(stream, "isatty") and stream.isatty()
 
