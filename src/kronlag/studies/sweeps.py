@@ -495,6 +495,8 @@ def _run_distributed(source, cases, settings, scheduler, per_case, batch_size, r
     client = owned or scheduler
     try:
         token, payload, settings_payload = _shipped(source, settings)
+        # sent to every worker once, not with every task (a big model's pickle is megabytes)
+        payload, settings_payload = client.scatter([payload, settings_payload], broadcast=True, hash=False)
         threads = sum(worker.get("nthreads", 1) for worker in client.scheduler_info().get("workers", {}).values())
         size = batch_size or _batch_size(len(cases), max(threads, 1), per_case)
         futures = {client.submit(_run_batch, token, payload, batch, settings_payload=settings_payload, pure=False,
