@@ -174,3 +174,24 @@ def test_the_progress_bar_is_drawn_on_a_terminal_unless_switched_off(model, monk
     sweep(model, parameters=CASES, initial_states=INITIAL, fixed=["q1"], t_span=(0.0, 1.0), workers=0,
           progress=progress)
     assert (f"] {len(CASES)}/{len(CASES)} cases" in terminal.getvalue()) is progress
+
+
+def test_a_local_worker_killed_mid_sweep_loses_nothing(model, pool_calls):
+    import multiprocessing
+    import signal
+
+    killed = []
+
+    def kill_a_worker(done: int, total: int) -> None:
+        workers = multiprocessing.active_children()
+        if done >= 4 and workers and not killed:
+            os.kill(workers[0].pid, signal.SIGKILL)  # a worker process of this sweep
+            killed.append(workers[0].pid)
+
+    result = sweep(model, parameters=CASES, initial_states=INITIAL, fixed=["q1"], t_span=(0.0, 4.0), workers=2,
+                   batch_size=1, progress=kill_a_worker)
+    assert killed and pool_calls == [2]
+    assert len(result.table) == len(CASES) and set(result.table["status"]) == {"ok"}, result.failed
+    here = sweep(model, parameters=CASES, initial_states=INITIAL, fixed=["q1"], t_span=(0.0, 4.0), workers=0,
+                 progress=False)
+    assert without_wall_time(result).equals(without_wall_time(here))
