@@ -195,3 +195,17 @@ def test_a_local_worker_killed_mid_sweep_loses_nothing(model, pool_calls):
     here = sweep(model, parameters=CASES, initial_states=INITIAL, fixed=["q1"], t_span=(0.0, 4.0), workers=0,
                  progress=False)
     assert without_wall_time(result).equals(without_wall_time(here))
+
+
+@pytest.mark.slow
+def test_bench_sweep_prints_every_figure_beside_its_target():
+    import subprocess
+    from pathlib import Path
+
+    bench = Path(__file__).resolve().parents[1] / "bench" / "bench_sweep.py"
+    proc = subprocess.run([sys.executable, str(bench), "--cases", "8", "--small", "4", "--blocks", "1",
+                           "--t-end", "0.5"], capture_output=True, text=True, timeout=1800)  # a guard against a hang
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "load (1 min)" in proc.stdout and "time in a case" in proc.stdout
+    assert proc.stdout.count("(target >=") == 3
+    assert "results identical (bitwise) in one process, on workers and in the plain loop: True" in proc.stdout
