@@ -331,9 +331,8 @@ class _TextProgress:
 def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, parameters,
           initial_states, t_span: tuple[float, float], outcomes: Mapping[str, Callable] | None = None,
           scheduler=None, client=None, workers: int | None = None, fixed: Iterable[str] = (),
-          qd_fixed: Iterable[str] = (),
-          assemble: bool = True, keep_trajectories: bool = False, batch_size: int | None = None,
-          retries: int = 3, progress: bool | Callable[[int, int], None] = True,
+          qd_fixed: Iterable[str] = (), assemble: bool = True, keep_trajectories: bool = False,
+          batch_size: int | None = None, retries: int = 3, progress: bool | Callable[[int, int], None] = True,
           on_row: Callable[[dict], None] | None = None, controller: Callable | Sampled | None = None,
           **simulate_options) -> SweepResult:
     """Simulate every case of a grid or sample of parameter values and initial states.
