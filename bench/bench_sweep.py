@@ -23,7 +23,8 @@ compared):
 * with ``--dask``: the same sweep on a Dask ``LocalCluster`` of N workers started inside the timing.
 
 Also printed: the CPU time of each variant (this process's and its workers'), the machine's load (``os.getloadavg``, 1 min) at the start of each block, and the time
-a case takes in a worker and in this process, wall (the table's median ``wall_time``) and CPU (this
+a case takes in a worker and in this process (and whether Linux shares a busy CPU per session,
+``sched_autogroup``: then this session's workers together get its one share), wall (the table's median ``wall_time``) and CPU (this
 process's CPU time, the workers' from ``RUSAGE_CHILDREN`` once they have exited), which tells a
 worker's own overhead (CPU) from its waiting for a core the other load holds (wall).
 
@@ -66,6 +67,16 @@ def plain_loop(model, cases, t_end: float, t_eval) -> list[float]:
         outcomes = {name: outcome(trajectory) for name, outcome in DEFAULT_OUTCOMES.items()}
         finals.append(outcomes["final"]["q1_final"])
     return finals
+
+
+def autogroup() -> str:
+    """A note when Linux shares a busy CPU between sessions: then workers gain only from idle cores."""
+    try:
+        with open("/proc/sys/kernel/sched_autogroup_enabled", encoding="ascii") as flag:
+            enabled = flag.read().strip() == "1"
+    except OSError:
+        return ""
+    return " (CPU shared per session: sched_autogroup on)" if enabled else ""
 
 
 def children_cpu() -> float:
@@ -125,7 +136,7 @@ def main() -> None:
     median = {name: statistics.median(seconds) for name, seconds in times.items()}
     print(f"four-bar sweep: {len(cases)} cases x {arguments.t_end:g} s simulated, {arguments.points} outputs each; "
           f"{arguments.blocks} blocks, medians; load (1 min) at the blocks' starts: "
-          + ", ".join(f"{load:.2f}" for load in loads) + f" on {os.cpu_count()} CPUs")
+          + ", ".join(f"{load:.2f}" for load in loads) + f" on {os.cpu_count()} CPUs{autogroup()}")
     print(f"{'variant':<36}{'median s':>10}{'ms/case':>10}{'CPU s':>10}")
     for name, seconds in median.items():
         count = len(small) if name.startswith("small") else len(cases)
