@@ -22,11 +22,12 @@ compared):
   the same cases: it must run in this process and cost no more;
 * with ``--dask``: the same sweep on a Dask ``LocalCluster`` of N workers started inside the timing.
 
-Also printed: the CPU time of each variant (this process's and its workers'), the machine's load (``os.getloadavg``, 1 min) at the start of each block, and the time
-a case takes in a worker and in this process (and whether Linux shares a busy CPU per session,
-``sched_autogroup``: then this session's workers together get its one share), wall (the table's median ``wall_time``) and CPU (this
-process's CPU time, the workers' from ``RUSAGE_CHILDREN`` once they have exited), which tells a
-worker's own overhead (CPU) from its waiting for a core the other load holds (wall).
+Also printed: the CPU time of each variant (this process's and its workers'), the machine's load
+(``os.getloadavg``, 1 min) at the start of each block, whether Linux shares a busy CPU per session
+(``sched_autogroup``: then this session's workers together get its one share of a loaded machine),
+and the time a case takes in a worker and in this process, wall (the table's median ``wall_time``)
+and CPU (this process's CPU time, the workers' from ``RUSAGE_CHILDREN`` once they have exited),
+which tells a worker's own overhead (CPU) from its waiting for a core the other load holds (wall).
 
 Targets (issue 19, on an idle 2-core machine): the 2-worker sweep >= 1.7x one process (its start-up
 included), and never slower than a plain loop (>= 1.0x), also for small sweeps.
