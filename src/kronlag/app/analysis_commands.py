@@ -188,7 +188,8 @@ def _sweep(arguments: argparse.Namespace) -> None:
     rows = output if output is None or output.suffix == ".csv" else output.with_name(output.name + ".partial.csv")
     try:
         result = sweep(numeric, parameters=grid, initial_states=model.guess_vectors(), fixed=model.fixed,
-                       qd_fixed=model.qd_fixed, t_span=(0.0, t_end), workers=arguments.workers, progress=True,
+                       qd_fixed=model.qd_fixed, t_span=(0.0, t_end), workers=arguments.workers,
+                       scheduler=arguments.scheduler, progress=not arguments.no_progress,
                        on_row=_RowFile(rows, labels) if rows else None, **options)
     except SweepInterrupted as stop:
         if output:
@@ -225,7 +226,8 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
     sub.add_argument("--animate-mode", metavar="FILE", help="animate a mode shape (.gif, .mp4 or .html)")
     sub.add_argument("--mode", type=int, default=0, help="the mode to animate, 0 = lowest (default: 0)")
 
-    sub = command("sweep", _sweep, "simulate a grid of parameter values and initial coordinates/speeds (Dask)")
+    sub = command("sweep", _sweep,
+                  "simulate a grid of parameter values and initial coordinates/speeds (local processes or Dask)")
     sub.add_argument("--grid", action="append", type=_axis, required=True, metavar="NAME=START:STOP:COUNT",
                      help="values of a parameter, coordinate (q1) or speed (q1d): evenly spaced, or "
                           "NAME=V1,V2,...; in the model file's unit of NAME or with a unit of the same "
@@ -236,8 +238,12 @@ def add_commands(command: Callable[..., argparse.ArgumentParser]) -> None:
     sub.add_argument("--t-end", type=float, help="final time (default: the model's [simulation] t_end)")
     sub.add_argument("--method", help=method_help())
     sub.add_argument("--points", type=int, default=101, help="output times per case (default: 101)")
-    sub.add_argument("--workers", type=int, default=2,
-                     help="processes of the local Dask cluster; 0: run in this process (default: 2)")
+    sub.add_argument("--workers", type=int,
+                     help="local worker processes; 0: run in this process (default: one per CPU; a sweep "
+                          "too short to gain from them runs in this process)")
+    sub.add_argument("--scheduler", metavar="ADDRESS",
+                     help="run on an existing Dask cluster: its scheduler's address, e.g. tcp://host:8786")
+    sub.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     sub.add_argument("--output", metavar="FILE",
                      help="save the table of outcomes (.csv or .parquet; checked before the first case, rows "
                           "appended as cases finish, kept on Ctrl-C); swept columns are labelled 'NAME [unit]'")

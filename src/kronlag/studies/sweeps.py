@@ -1,24 +1,28 @@
-"""Parameter sweeps: many simulations of one model, on a Dask cluster.
+"""Parameter sweeps: many simulations of one model, on local worker processes or a Dask cluster.
 
 :func:`sweep` runs one simulation per case -- a set of parameter values and
-initial coordinates or speeds, from a grid or a list of samples -- on the
-workers of a :class:`dask.distributed.Client` (a local cluster of processes by
-default) and gathers a :class:`pandas.DataFrame` of scalar outcomes, one row
-per case.  The model is built once: each worker unpickles it once and makes
-every case with :meth:`~kronlag.numeric.NumericModel.with_parameters` (no code
-generated or compiled per case).  A case that fails keeps its row, with its
-status and message; a task lost with a dying worker is run again elsewhere.
+initial coordinates or speeds, from a grid or a list of samples -- and gathers a
+:class:`pandas.DataFrame` of scalar outcomes, one row per case.  The first two
+cases run in the calling process; the faster of them estimates the rest, which
+run there too when that is quicker than starting workers
+(:data:`PARALLEL_FROM_SECONDS`), else on local worker processes
+(:mod:`kronlag.studies.local_pool`: forked, no scheduler) or, given
+``scheduler``, on the workers of a Dask cluster, in batches of cases
+(:data:`TASK_SECONDS` each).  The model is built once: each worker unpickles it
+once and makes every case with :meth:`~kronlag.numeric.NumericModel.with_parameters`
+(no code generated or compiled per case).  A case that fails keeps its row, with
+its status and message; a task lost with a dying worker is run again elsewhere.
 Rows are handed to ``on_row`` as cases finish, and a sweep stopped by Ctrl-C
 raises :class:`SweepInterrupted` carrying the finished rows.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import itertools
 import math
 import pickle
-import signal
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -32,6 +36,7 @@ from ..numeric.numeric_model import NumericModel
 from ..simulation.labelled import LabelledArrays, rate_unit
 from ..simulation.controllers import Sampled
 from ..simulation.simulate import simulate
+from .local_pool import run_batches, usable_cpus
 
 if TYPE_CHECKING:
     import pandas
@@ -39,7 +44,8 @@ if TYPE_CHECKING:
 
     from ..simulation.trajectory import Trajectory
 
-__all__ = ["sweep", "SweepResult", "SweepInterrupted", "grid", "DEFAULT_OUTCOMES"]
+__all__ = ["sweep", "SweepResult", "SweepInterrupted", "grid", "DEFAULT_OUTCOMES", "PARALLEL_FROM_SECONDS",
+           "TASK_SECONDS"]
 
 
 def _final_coordinates(trajectory: Trajectory) -> dict[str, float]:
@@ -80,6 +86,16 @@ def _column_units(units: Mapping[str, str], coordinate_names: Sequence[str]) -> 
 
 
 _STATUS_OK, _STATUS_FAILED, _STATUS_ERROR, _STATUS_LOST = "ok", "failed", "error", "lost"
+
+#: Without a scheduler, the cases after the first two run on local worker processes only when they would
+#: take at least this long in this process (s, estimated from the faster of the first two): below it,
+#: starting the workers (0.1-0.3 s forked, more spawned) and shipping the model would cost more than
+#: they save.
+PARALLEL_FROM_SECONDS = 1.0
+
+#: The duration a task (a batch of cases) is sized to, in s, by the time of the first cases: long against
+#: the few ms a task costs to send and gather, short against the whole sweep (a balanced end).
+TASK_SECONDS = 0.25
 
 
 def grid(**axes: Sequence[float]) -> list[dict[str, float]]:
@@ -249,10 +265,10 @@ def _run_batch(token: str, payload: bytes, cases: list[tuple[int, dict]], settin
 # -- the sweep ------------------------------------------------------------------------------------------
 
 
-def _batches(cases: Iterable[dict], size: int) -> Iterator[list[tuple[int, dict]]]:
-    """``(index, case)`` in consecutive batches of ``size`` (one pass over the cases)."""
+def _batches(cases: Iterable[tuple[int, dict]], size: int) -> Iterator[list[tuple[int, dict]]]:
+    """The ``(index, case)`` pairs in consecutive batches of ``size`` (one pass over the cases)."""
     batch: list[tuple[int, dict]] = []
-    for item in enumerate(cases):
+    for item in cases:
         batch.append(item)
         if len(batch) == size:
             yield batch
@@ -263,7 +279,7 @@ def _batches(cases: Iterable[dict], size: int) -> Iterator[list[tuple[int, dict]
 
 def _check_options(workers, batch_size, retries) -> None:
     """InputError for a negative number of workers or retries or a batch size below 1."""
-    for name, value, least in (("workers", workers, 0), ("retries", retries, 0),
+    for name, value, least in (("workers", 0 if workers is None else workers, 0), ("retries", retries, 0),
                                ("batch_size", 1 if batch_size is None else batch_size, 1)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
             raise InputError(f"{name} must be an integer >= {least}, got {value!r}")
@@ -295,7 +311,8 @@ def _check_names(source, cases: list[dict]) -> None:
 class _TextProgress:
     """``[#####.....] done/total cases`` on standard error (a terminal only), at most 10 redraws/s."""
 
-    def __init__(self, total: int, stream=sys.stderr, width: int = 30):
+    def __init__(self, total: int, stream=None, width: int = 30):
+        stream = sys.stderr if stream is None else stream  # the one of the time of the sweep
         self.total, self.stream, self.width, self.drawn = total, stream, width, 0.0
         self.enabled = hasattr(stream, "isatty") and stream.isatty()
 
@@ -313,9 +330,9 @@ class _TextProgress:
 
 def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, parameters,
           initial_states, t_span: tuple[float, float], outcomes: Mapping[str, Callable] | None = None,
-          client=None, workers: int = 2, fixed: Iterable[str] = (), qd_fixed: Iterable[str] = (),
-          assemble: bool = True, keep_trajectories: bool = False, batch_size: int | None = None,
-          retries: int = 3, progress: bool | Callable[[int, int], None] = True,
+          scheduler=None, client=None, workers: int | None = None, fixed: Iterable[str] = (),
+          qd_fixed: Iterable[str] = (), assemble: bool = True, keep_trajectories: bool = False,
+          batch_size: int | None = None, retries: int = 3, progress: bool | Callable[[int, int], None] = True,
           on_row: Callable[[dict], None] | None = None, controller: Callable | Sampled | None = None,
           **simulate_options) -> SweepResult:
     """Simulate every case of a grid or sample of parameter values and initial states.
@@ -340,21 +357,31 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
         :data:`DEFAULT_OUTCOMES` (final coordinates, energy drift: the energy
         balance ``max |E - E(0) - W|``, constraint residual) when omitted.  Must be picklable
         (cloudpickle: lambdas are).
+    scheduler : str or dask.distributed.Client, optional
+        An existing Dask cluster to run on: its scheduler's address (``"tcp://host:8786"``;
+        a client is connected for the sweep and closed after it) or a connected
+        ``Client``.  None: local worker processes (``workers``), no Dask.
     client : dask.distributed.Client, optional
-        Where to run.  None: a local cluster of ``workers`` processes (one thread
-        each), closed at the end.
-    workers : int
-        Processes of the local cluster (>= 0); 0 runs every case in this process (no Dask).
+        The same as ``scheduler=client`` (give one of the two).
+    workers : int, optional
+        Local worker processes (>= 0) when no scheduler is given: by default one per CPU
+        this process may use; 0 runs every case in this process.  The first two cases
+        always run in this process; when the faster of them, times the remaining cases,
+        is below :data:`PARALLEL_FROM_SECONDS` (or one worker is all there is), the rest
+        run here too: starting workers would cost more than it saves.
     fixed, qd_fixed : coordinate names held while assembling every case.
     assemble : bool
         False: use ``initial_states`` as given (already consistent) when nothing is held.
     keep_trajectories : bool
         Also gather every trajectory (memory!); see :meth:`SweepResult.to_xarray`.
     batch_size : int, optional
-        Cases per task, >= 1 (default: about 8 tasks per worker).  A task lost with its
-        worker is run again; ``retries`` more times when it raises.
+        Cases per task, >= 1 (default: at least 4 tasks per worker, each of about
+        :data:`TASK_SECONDS` by the time of the first cases).  A task lost with its
+        worker is run again (a local one case by case, each up to ``retries`` times);
+        on Dask ``retries`` more times when it raises.
     progress : bool or callable ``f(done, total)``
-        True: a bar on standard error when it is a terminal.
+        True: a bar on standard error when it is a terminal (never in tests or
+        doctests); False: none.
     on_row : callable ``f(row: dict)``, optional
         Called in this process with each row of the table as its case finishes (in the
         order they finish), e.g. to append it to a file.
@@ -372,12 +399,16 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
     Raises
     ------
     InputError
-        Unknown swept names, ``workers`` or ``retries`` < 0, ``batch_size`` < 1.
+        Unknown swept names, ``workers`` or ``retries`` < 0, ``batch_size`` < 1, both
+        ``scheduler`` and ``client``.
     SweepInterrupted
         Ctrl-C (a KeyboardInterrupt) stopped the sweep; its ``partial`` is the
         :class:`SweepResult` of the cases that finished.
     """
     _check_options(workers, batch_size, retries)
+    if scheduler is not None and client is not None:
+        raise InputError("give scheduler= or client=, not both")
+    scheduler = client if scheduler is None else scheduler
     cases = _cases(parameters)
     _check_names(model_or_factory, cases)
     settings = {"t_span": tuple(t_span), "initial_states": initial_states, "fixed": set(fixed),
@@ -393,54 +424,89 @@ def sweep(model_or_factory: NumericModel | Callable[[dict], NumericModel], *, pa
         report(len(results), len(cases))
 
     try:
-        if client is None and workers == 0:
-            for index, values in enumerate(cases):
-                finished(index, *_run_case(model_or_factory, values, settings))
+        local = usable_cpus() if workers is None else workers
+        first = 0 if scheduler is None and local == 0 else min(len(cases), 2)
+        for index in range(first):  # in this process: their time estimates the rest
+            finished(index, *_run_case(model_or_factory, cases[index], settings))
+        rest = list(enumerate(cases))[first:]
+        per_case = min((results[index][0]["wall_time"] for index in range(first)), default=0.0)
+        if scheduler is not None:
+            _run_distributed(model_or_factory, rest, settings, scheduler, per_case, batch_size, retries, finished)
+        elif rest and local > 1 and per_case * len(rest) >= PARALLEL_FROM_SECONDS:
+            _run_local(model_or_factory, rest, settings, local, per_case, batch_size, retries, finished)
         else:
-            _run_distributed(model_or_factory, cases, settings, client, workers, batch_size, retries, finished)
+            for index, values in rest:
+                finished(index, *_run_case(model_or_factory, values, settings))
     except KeyboardInterrupt:
         raise SweepInterrupted(SweepResult._of(cases, results, keep_trajectories), len(cases)) from None
     return SweepResult._of(cases, results, keep_trajectories)
 
 
-def _leave_ctrl_c_to_the_caller() -> None:
-    """Run in each worker of the sweep's own cluster: ignore SIGINT, which a terminal sends to every process
-    of the group, so that Ctrl-C reaches only the calling process (it keeps the finished rows and closes
-    the cluster) and the workers print no tracebacks of their own."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+def _batch_size(count: int, workers: int, per_case: float) -> int:
+    """Cases per task: at least 4 tasks a worker (the last to finish leaves the others idle for at most
+    about one task), each of about :data:`TASK_SECONDS` (a task's overhead is a few ms)."""
+    balanced = math.ceil(count / (4 * max(workers, 1)))
+    short = int(TASK_SECONDS / per_case) if per_case > 0 else balanced
+    return max(1, min(balanced, short))
 
 
-def _run_distributed(source, cases, settings, client, workers, batch_size, retries, finished) -> None:
+def _shipped(source, settings) -> tuple[str, bytes, bytes]:
+    """The model (or factory) and the settings pickled for the workers, with the model's token."""
     try:
         import cloudpickle
-        from dask.distributed import Client, LocalCluster, as_completed
     except ImportError as error:
-        raise ImportError("kronlag.sweep needs Dask: pip install 'dask[distributed]' (or kronlag[sweep]); "
-                          "workers=0 runs the cases in this process") from error
-    owned = None
-    if client is None:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
-        owned = client = Client(cluster)
-        client.run(_leave_ctrl_c_to_the_caller)
+        raise ImportError("kronlag.sweep needs cloudpickle for worker processes: pip install cloudpickle "
+                          "(or kronlag[sweep]); workers=0 runs the cases in this process") from error
+    payload = cloudpickle.dumps(source)  # carries lambdas: factories, time-varying parameters, outcomes
+    return hashlib.sha256(payload).hexdigest(), payload, cloudpickle.dumps(settings)
+
+
+def _lost(batch: Sequence[tuple[int, dict]], message: str) -> list:
+    """The rows of the cases of a batch that could not be run."""
+    return [(index, {"status": _STATUS_LOST, "message": message, "wall_time": float("nan")}, None)
+            for index, _ in batch]
+
+
+def _run_local(source, cases, settings, workers, per_case, batch_size, retries, finished) -> None:
+    """The cases on local worker processes (:mod:`kronlag.studies.local_pool`)."""
+    token, payload, settings_payload = _shipped(source, settings)
+
+    def gather(ran: list) -> None:
+        for index, row, trajectory in ran:
+            finished(index, row, trajectory)
+
+    run_batches(functools.partial(_run_batch, token, payload, settings_payload=settings_payload),
+                list(_batches(cases, batch_size or _batch_size(len(cases), workers, per_case))),
+                workers=workers, retries=retries, finished=lambda batch, ran: gather(ran),
+                lost=lambda batch, message: gather(_lost(batch, message)))
+
+
+def _run_distributed(source, cases, settings, scheduler, per_case, batch_size, retries, finished) -> None:
+    """The cases on a Dask cluster: ``scheduler`` is a ``Client`` or a scheduler's address."""
     try:
-        payload = cloudpickle.dumps(source)  # carries lambdas: factories, time-varying parameters
-        token = hashlib.sha256(payload).hexdigest()
-        settings_payload = cloudpickle.dumps(settings)
-        parallel = max(1, len(client.scheduler_info().get("workers", {})) or workers)
-        size = batch_size or max(1, math.ceil(len(cases) / (8 * parallel)))
-        futures = {client.submit(_run_batch, token, payload, batch, settings_payload, pure=False,
+        from dask.distributed import Client, as_completed
+    except ImportError as error:
+        raise ImportError("kronlag.sweep(scheduler=...) needs Dask: pip install 'dask[distributed]' (or "
+                          "kronlag[sweep]); without a scheduler the cases run on local processes") from error
+    if not cases:
+        return
+    owned = Client(scheduler) if isinstance(scheduler, str) else None
+    client = owned or scheduler
+    try:
+        token, payload, settings_payload = _shipped(source, settings)
+        # sent to every worker once, not with every task (a big model's pickle is megabytes)
+        payload, settings_payload = client.scatter([payload, settings_payload], broadcast=True, hash=False)
+        threads = sum(worker.get("nthreads", 1) for worker in client.scheduler_info().get("workers", {}).values())
+        size = batch_size or _batch_size(len(cases), max(threads, 1), per_case)
+        futures = {client.submit(_run_batch, token, payload, batch, settings_payload=settings_payload, pure=False,
                                  retries=retries): batch for batch in _batches(cases, size)}
         for future in as_completed(futures):
-            batch = futures[future]
             try:
                 ran = future.result()
             except Exception as error:  # the task itself was lost (its workers kept dying)
-                ran = [(index, {"status": _STATUS_LOST, "message": f"{type(error).__name__}: {error}",
-                                "wall_time": float("nan")}, None) for index, _ in batch]
+                ran = _lost(futures[future], f"{type(error).__name__}: {error}")
             for index, row, trajectory in ran:
                 finished(index, row, trajectory)
     finally:
         if owned is not None:
-            cluster = owned.cluster
             owned.close()
-            cluster.close()
