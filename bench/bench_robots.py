@@ -50,6 +50,15 @@ ROBOTS = {
     "ur3": "ur_description/urdf/ur3_robot.urdf",
 }
 
+#: Floating-base robots: read with ``load_urdf(path, floating_base=True)``, against Pinocchio's
+#: ``buildModelFromUrdf(path, JointModelFreeFlyer())`` (:class:`FloatingReference`).
+FLOATING = {
+    "solo12": "solo_description/robots/solo12.urdf",
+    "go1": "go1_description/urdf/go1.urdf",
+    "anymal": "anymal_b_simple_description/robots/anymal.urdf",
+    "talos": "talos_data/robots/talos_reduced.urdf",
+}
+
 
 def robots_folder() -> Path | None:
     """example-robot-data's ``robots`` folder (the pip package installs it under ``cmeel.prefix``), or None."""
@@ -103,6 +112,121 @@ class PinocchioReference:
         bias = pin.nonLinearEffects(model, data, pq, pv).copy()
         return {"M": self.back(mass), "g": self.back(gravity), "Cqd": self.back(bias - gravity),
                 "aba": self.back(pin.aba(model, data, pq, pv, ptau).copy())}
+
+
+class FloatingReference:
+    """Pinocchio's free-flyer model of a URDF and the map from kronlag's coordinates to its q and v.
+
+    kronlag's floating base has the coordinates ``p`` (the root link's origin in the world) and the
+    Euler parameters ``e = (e0, e1, e2, e3)``; Pinocchio's free flyer ``q = (p, x y z w)`` with the
+    quaternion ``(e1, e2, e3, e0)`` and ``v = (R^T pd, omega)``, both in the base frame, where
+    ``omega = 2 G(e) ed`` (:func:`kronlag.model.rotations.euler_parameter_rates`).  On the constraint
+    manifold (``|e| = 1``, ``e . ed = 0``) kronlag's speeds are ``qd = S v`` with
+    ``S = diag(R, G^T / 2, I)`` (``G G^T = I``), so the kinetic energy gives ``M_pin = S^T M S``, the
+    generalized forces ``g_pin = S^T g`` and ``C_pin v = S^T (M Sd v + C qd)`` with ``Sd v =
+    (R [omega]x v_lin, G(ed)^T omega / 2, 0)``; the accelerations map back as ``a_lin = R^T pdd -
+    omega x v_lin``, ``omega_d = 2 G(e) edd`` (``G(ed) ed = 0``).  The rows of kronlag's ``S^T``
+    annihilate the normalization constraint's gradient ``2 e``, so its multiplier does not enter.
+    """
+
+    def __init__(self, path: Path, system: kronlag.System):
+        import pinocchio as pin
+
+        self.pin = pin
+        self.model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+        self.data = self.model.createData()
+        base = system.robot.joint("root_joint").coordinates
+        index = {q.name: k for k, q in enumerate(system.coordinates)}
+        self.base = [index[name] for name in base]
+        self.slots = []  # (kronlag index, pinocchio q index, v index, nq) per joint coordinate
+        for joint in system.robot.joints:
+            if joint.coordinate and joint.name != "root_joint":
+                peer = self.model.joints[self.model.getJointId(joint.name)]
+                self.slots.append((index[joint.coordinate], peer.idx_q, peer.idx_v, peer.nq))
+        if sorted(slot[2] for slot in self.slots) != list(range(6, self.model.nv)):
+            raise RuntimeError(f"{path}: the joints of kronlag and Pinocchio do not match")
+
+    def random_state(self, rng, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """kronlag's ``q`` (a random unit e) and Pinocchio's ``v`` (random)."""
+        q = rng.uniform(-1.5, 1.5, m)
+        e = rng.normal(size=4)
+        q[self.base[3:]] = e / np.linalg.norm(e)
+        return q, rng.uniform(-2, 2, self.model.nv)
+
+    def _rotation(self, q):
+        e0, e1, e2, e3 = q[self.base[3:]]
+        rates = np.array([[-e1, e0, e3, -e2], [-e2, -e3, e0, e1], [-e3, e2, -e1, e0]])
+        vector = np.array([e1, e2, e3])
+        skew = np.array([[0, -e3, e2], [e3, 0, -e1], [-e2, e1, 0]])
+        return (e0 ** 2 - vector @ vector) * np.eye(3) + 2 * (np.outer(vector, vector) + e0 * skew), rates
+
+    def S(self, q) -> np.ndarray:
+        """``qd = S v`` (kronlag speeds of Pinocchio's v), shape (m, nv)."""
+        rotation, rates = self._rotation(q)
+        result = np.zeros((len(q), self.model.nv))
+        result[np.ix_(self.base[:3], range(3))] = rotation
+        result[np.ix_(self.base[3:], range(3, 6))] = rates.T / 2
+        for k, _, iv, _ in self.slots:
+            result[k, iv] = 1.0
+        return result
+
+    def q(self, q: np.ndarray) -> np.ndarray:
+        result = np.zeros(self.model.nq)
+        e0, e1, e2, e3 = q[self.base[3:]]
+        result[:7] = (*q[self.base[:3]], e1, e2, e3, e0)
+        for k, iq, _, nq in self.slots:
+            result[iq:iq + nq] = (np.cos(q[k]), np.sin(q[k])) if nq == 2 else q[k]
+        return result
+
+    def tau(self, system: kronlag.System, values: dict) -> np.ndarray:
+        """Pinocchio's joint torques of kronlag's parameter values (the base is not actuated)."""
+        result = np.zeros(self.model.nv)
+        for joint in system.robot.joints:
+            if joint.torque:
+                result[next(iv for k, _, iv, _ in self.slots if system.coordinates[k].name == joint.coordinate)] = \
+                    values[joint.torque]
+        return result
+
+    def compare(self, model, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> dict[str, float]:
+        """The relative differences of M, g, C qd and the accelerations at ``(q, v)``."""
+        pin, peer, data = self.pin, self.model, self.data
+        S, (rotation, rates) = self.S(q), self._rotation(q)
+        qd = S @ v
+        rates_dot = self._rotation(np.where(np.isin(np.arange(len(q)), self.base[3:]), qd, 0.0))[1]
+        S_dot_v = np.zeros(len(q))
+        S_dot_v[self.base[:3]] = rotation @ np.cross(v[3:6], v[:3])
+        S_dot_v[self.base[3:]] = rates_dot.T @ v[3:6] / 2
+        pq = self.q(q)
+        mass = pin.crba(peer, data, pq)
+        mass = np.triu(mass) + np.triu(mass, 1).T
+        gravity = pin.computeGeneralizedGravity(peer, data, pq).copy()
+        bias = pin.nonLinearEffects(peer, data, pq, v).copy() - gravity
+        accelerations = pin.aba(peer, data, pq, v, tau).copy()
+        ours_mass = model.M(q)
+        qdd = model.forward_dynamics(q, qd).qdd
+        nu_dot = np.zeros(peer.nv)
+        nu_dot[:3] = rotation.T @ qdd[self.base[:3]] - np.cross(v[3:6], v[:3])
+        nu_dot[3:6] = 2 * rates @ qdd[self.base[3:]]
+        for k, _, iv, _ in self.slots:
+            nu_dot[iv] = qdd[k]
+        pairs = {"M": (S.T @ ours_mass @ S, mass), "g": (S.T @ model.g(q), gravity),
+                 "Cqd": (S.T @ (ours_mass @ S_dot_v + model.Cqd(q, qd)), bias), "qdd": (nu_dot, accelerations)}
+        return {key: float(np.abs(ours - theirs).max()) / max(1.0, float(np.abs(theirs).max()))
+                for key, (ours, theirs) in pairs.items()}
+
+
+def compare_floating(path: Path, system: kronlag.System, model, values: dict, *, states: int = 5,
+                     seed: int = 1) -> dict[str, float]:
+    """The largest relative differences to Pinocchio's free-flyer model at random states."""
+    reference = FloatingReference(path, system)
+    rng = np.random.default_rng(seed)
+    tau = reference.tau(system, values)
+    worst = {"M": 0.0, "g": 0.0, "Cqd": 0.0, "qdd": 0.0}
+    for _ in range(states):
+        q, v = reference.random_state(rng, len(system.coordinates))
+        for key, value in reference.compare(model, q, v, tau).items():
+            worst[key] = max(worst[key], value)
+    return worst
 
 
 def constrained_accelerations(mass, rhs, jacobian) -> np.ndarray:

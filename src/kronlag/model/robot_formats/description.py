@@ -50,12 +50,15 @@ class RobotJoint:
     origin : tuple of 6 floats
         ``x y z roll pitch yaw`` of the joint frame in the parent link's frame.
     coordinate : str or None
-        The coordinate the joint moves (``None`` for a fixed joint, merged into its parent).
+        The (first) coordinate the joint moves (``None`` for a fixed joint, merged into its parent).
     limits : JointLimits
     mimic : (joint, multiplier, offset) or None
         ``q = multiplier * q_joint + offset``, added as the holonomic constraint ``"<name>.mimic"``.
     torque : str or None
         The parameter of the joint's actuator torque or force (``"tau_<coordinate>"``).
+    coordinates : tuple of str
+        All its coordinates: one, or those of a floating, ball, planar or universal joint
+        (``<name>_x``, ..., ``<name>_e0 .. _e3``; see :mod:`.tree`).
     """
 
     name: str
@@ -68,6 +71,7 @@ class RobotJoint:
     limits: JointLimits = JointLimits()
     mimic: tuple[str, float, float] | None = None
     torque: str | None = None
+    coordinates: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
