@@ -105,6 +105,9 @@ class RobotDescription:
     visuals : tuple of Visual
     frames : dict of str to Frame
         Every link's frame (origin and rotation, expressions of the coordinates) in the world.
+    local_frames : dict of str to (str, Frame)
+        Every link but the root: its parent link and its frame in the parent link's frame
+        (expressions of its joint's coordinates only).
     values : dict of str to float
         Default parameter values: ``g`` (9.81, or the magnitude of the file's gravity) and every
         actuator torque 0.
@@ -124,6 +127,7 @@ class RobotDescription:
     body_of_link: dict[str, str] = field(default_factory=dict)
     visuals: tuple[Visual, ...] = ()
     frames: dict[str, Frame] = field(default_factory=dict)
+    local_frames: dict[str, tuple[str, Frame]] = field(default_factory=dict)
     values: dict[str, float] = field(default_factory=dict)
     q_reference: dict[str, float] = field(default_factory=dict)
     skipped: str = ""

@@ -49,7 +49,7 @@ def three(values: Sequence[float]) -> tuple[float, float, float]:
     x, y, z = values
     return x, y, z
 
-__all__ = ["Inertial", "NO_MASS", "JOINT_COORDINATES", "TreeJoint", "at_reference", "build_system", "check_inertia", "combine", "moved",
+__all__ = ["Inertial", "NO_MASS", "JOINT_COORDINATES", "TreeJoint", "at_reference", "relative_frames", "build_system", "check_inertia", "combine", "moved",
            "orientation_rows", "report_skipped", "rpy_matrix", "rpy_of", "transform"]
 
 
@@ -160,10 +160,11 @@ def _joint_factors(axis_of_joint: Sequence[float], coordinate: sp.Symbol) -> lis
 
 
 def _plane(axis: Sequence[float]) -> tuple[sp.Matrix, sp.Matrix]:
-    """Two unit vectors ``u, v`` normal to ``axis`` with ``u x v = axis`` (principal axes where the axis is one)."""
+    """Two unit vectors ``u, v`` normal to ``axis`` with ``u x v = axis``: for the axis z, x and y (the
+    next principal axes in cyclic order; projected onto the plane for a general axis)."""
     normal = np.array(axis, dtype=float)
-    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-    u = np.cross(helper, normal)
+    helper = np.eye(3)[(int(np.argmax(np.abs(normal))) + 1) % 3]
+    u = helper - (helper @ normal) * normal
     u /= np.linalg.norm(u)
     v = np.cross(normal, u)
     return tuple(sp.Matrix([sp.Integer(round(x)) if abs(x - round(x)) < 1e-15 else sp.Float(x) for x in w])
@@ -359,18 +360,23 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
                     gravity=[g * x for x in down], name=name)
     placements = {root: _Placement(sp.zeros(3, 1), sp.eye(3), [], GROUND, np.eye(4), [])}
     parts: dict[str, list[Inertial]] = {}
+    local_frames: dict[str, tuple[str, Frame]] = {}
     for spec in order:
         parent = placements[spec.parent]
         x, y, z, roll, pitch, yaw = spec.origin
         turn = rpy_factors(roll, pitch, yaw)
         factors = _compact(parent.factors + turn)
-        rotation = parent.rotation * RotationSequence(turn).matrix if turn else parent.rotation
+        turned = RotationSequence(turn).matrix if turn else sp.eye(3)
+        rotation = parent.rotation * turned if turn else parent.rotation
         origin = parent.origin + parent.rotation * sp.Matrix([x, y, z])
         points = parent.points + [origin]
         if spec.kind == "fixed":
             in_body = parent.in_body @ transform(spec.origin)
             placements[spec.child] = _Placement(origin, rotation, factors, parent.body, in_body, points)
+            local_frames[spec.child] = (spec.parent, Frame(sp.Matrix([x, y, z]), turned))
             continue
+        local_frames[spec.child] = (spec.parent, Frame(*_step(spec, coordinates_of[spec.name], sp.Matrix([x, y, z]),
+                                                              turned)[::2]))
         origin, step, rotation = _step(spec, coordinates_of[spec.name], origin, rotation)
         factors = factors + step
         placements[spec.child] = _Placement(origin, rotation, factors, spec.child, np.eye(4), points)
@@ -415,6 +421,7 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
         visuals=tuple(Visual(link, placements[link].body, shape, size, placements[link].in_body @ pose, filename)
                       for link, shape, size, pose, filename in visuals),
         frames={link: Frame(placement.origin, placement.rotation) for link, placement in placements.items()},
+        local_frames=local_frames,
         values={"g": magnitude, **{symbol.name: 0.0 for symbol in torques.values()}},
         q_reference={q.name: value for spec in moving for q, value in _reference(spec, coordinates_of[spec.name])},
         skipped=document.skipped_summary())
@@ -434,6 +441,31 @@ def robot_of(system: System) -> RobotDescription:
     """``system.robot`` of a system :func:`build_system` made (never ``None`` there)."""
     assert system.robot is not None, "not a system read from a robot file"
     return system.robot
+
+
+def relative_frames(system: System, first: str, second: str) -> tuple[Frame, Frame]:
+    """The frames of the links ``first`` and ``second`` in the frame of their nearest common ancestor
+    link: expressions of the joints between them only (a loop's constraints written so stay small;
+    in the world frame they would hold every joint from the root, the floating base's among them)."""
+    local = robot_of(system).local_frames
+
+    def path(link: str) -> list[str]:
+        links = [link]
+        while links[-1] in local:
+            links.append(local[links[-1]][0])
+        return links
+
+    first_path, second_path = path(first), path(second)
+    ancestor = next(link for link in first_path if link in second_path)
+
+    def frame(links: list[str]) -> Frame:
+        origin, rotation = sp.zeros(3, 1), sp.eye(3)
+        for link in reversed(links[:links.index(ancestor)]):
+            step = local[link][1]
+            origin, rotation = origin + rotation * sp.Matrix(step.origin), rotation * sp.Matrix(step.rotation)
+        return Frame(origin, rotation)
+
+    return frame(first_path), frame(second_path)
 
 
 def at_reference(system: System, expression) -> np.ndarray:
