@@ -17,6 +17,10 @@ exact solution of ``M qdd + Phi_q^T lambda = tau - nle``, ``Phi_q qdd = 0`` buil
 Pinocchio's M and nle).  Continuous joints have Pinocchio coordinates ``(cos q, sin q)``.  The
 relative difference is ``max |kronlag - pinocchio| / max(1, max |pinocchio|)`` over the states.
 
+Floating-base robots (``FLOATING``: Solo 12, A1, Go2, Talos) are read with ``floating_base=True``
+and compared with Pinocchio's free flyer (:class:`FloatingReference` documents the map of the
+coordinates); Cassie's SDF row gives its loops' ranks and mobility at the reference pose.
+
 With ``pip install mujoco`` two MJCF rows follow (``tests/robot_files``): the spatial arm
 ``arm.xml`` read with ``kronlag.load_mjcf`` against ``mj_fullM`` and ``qfrc_bias`` (FD timed
 against ``mj_forward``, which does more: collisions, sensors), and the four-bar ``four_bar.xml``
@@ -54,8 +58,8 @@ ROBOTS = {
 #: ``buildModelFromUrdf(path, JointModelFreeFlyer())`` (:class:`FloatingReference`).
 FLOATING = {
     "solo12": "solo_description/robots/solo12.urdf",
-    "go1": "go1_description/urdf/go1.urdf",
-    "anymal": "anymal_b_simple_description/robots/anymal.urdf",
+    "a1": "a1_description/urdf/a1.urdf",
+    "go2": "go2_description/urdf/go2.urdf",
     "talos": "talos_data/robots/talos_reduced.urdf",
 }
 
@@ -269,6 +273,69 @@ def compare(path: Path, system: kronlag.System, model, tau: np.ndarray, *, state
     return worst
 
 
+def run_floating(name: str, path: Path, *, quick: bool, backend: str = "auto") -> dict:
+    """A floating-base row: ``load_urdf(path, floating_base=True)`` against Pinocchio's free flyer
+    (:func:`compare_floating`); FD timed against ``aba`` at a random state."""
+    start = time.perf_counter()
+    system = kronlag.load_urdf(path, floating_base=True)
+    loaded = time.perf_counter()
+    equations = kronlag.derive(system)
+    derived = time.perf_counter()
+    rng = np.random.default_rng(7)
+    values = {**system.robot.values, **{joint.torque: rng.uniform(-1, 1) for joint in system.robot.joints
+                                        if joint.torque}}
+    model = equations.numeric(values, backend=backend)
+    built = time.perf_counter()
+    worst = compare_floating(path, system, model, values)
+    reference = FloatingReference(path, system)
+    q, v = reference.random_state(rng, len(system.coordinates))
+    qd, pq, ptau = reference.S(q) @ v, reference.q(q), reference.tau(system, values)
+    number = 200 if quick else 20000
+    ours = per_call(lambda: model.forward_dynamics(q, qd), number=number)
+    theirs = per_call(lambda: reference.pin.aba(reference.model, reference.data, pq, v, ptau), number=number)
+    return {"robot": name, "bodies": len(system.bodies), "coordinates": len(system.coordinates),
+            "constraints": len(system.constraints), "mobility": model.mobility(q), "load_s": loaded - start,
+            "derive_s": derived - loaded, "build_s": built - derived, "max_rel": max(worst.values()),
+            "worst": max(worst, key=worst.get), "fd_us": ours, "aba_us": theirs}
+
+
+#: Cassie's closed-loop SDF (floating pelvis, four ball-joint loops).
+CASSIE = "cassie_description/robots/cassie_v2.sdf"
+
+
+def loop_ranks(system: kronlag.System) -> tuple[dict[str, int], int, float]:
+    """The rank of each loop-closing joint's rows, the mobility (the rank policy of
+    ``kronlag.numeric.tolerances``) and the largest residual, from ``Phi`` and ``Phi_q`` at the file's
+    reference pose, without deriving the dynamics."""
+    import sympy as sp
+
+    from kronlag.numeric.tolerances import RANK_RTOL, matrix_rank
+
+    reference = {q: system.robot.q_reference.get(q.name, 0.0) for q in system.coordinates}
+    rows = sp.Matrix([constraint.expression for constraint in system.constraints])
+    residual = float(np.abs(np.array(rows.xreplace(reference), dtype=float)).max())
+    jacobian = np.array(rows.jacobian(list(system.coordinates)).xreplace(reference), dtype=float)
+    loops: dict[str, list[int]] = {}
+    for index, constraint in enumerate(system.constraints):
+        loops.setdefault(constraint.name.rsplit(".", 1)[0], []).append(index)
+    ranks = {loop: matrix_rank(jacobian[rows_of], RANK_RTOL) for loop, rows_of in loops.items()}
+    return ranks, len(system.coordinates) - matrix_rank(jacobian, RANK_RTOL), residual
+
+
+def run_cassie(folder: Path) -> dict:
+    """Cassie's row: load time, the loops' ranks and the mobility at the reference pose (the
+    derivation of its dynamics is not timed here: it takes too long today)."""
+    start = time.perf_counter()
+    system = kronlag.load_sdf(folder / CASSIE)
+    loaded = time.perf_counter()
+    ranks, mobility, residual = loop_ranks(system)
+    print(f"cassie loops: {ranks}, residual at the reference {residual:.2e}")
+    return {"robot": "cassie_v2.sdf", "bodies": len(system.bodies), "coordinates": len(system.coordinates),
+            "constraints": len(system.constraints), "mobility": mobility, "load_s": loaded - start,
+            "derive_s": float("nan"), "build_s": float("nan"), "max_rel": float("nan"), "worst": "-",
+            "fd_us": float("nan"), "aba_us": float("nan")}
+
+
 def per_call(function, *, number: int) -> float:
     return min(timeit.repeat(function, number=number, repeat=5)) / number * 1e6
 
@@ -352,7 +419,7 @@ def run_mjcf(name: str, *, quick: bool) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    known = [*ROBOTS, "arm", "four_bar"]
+    known = [*ROBOTS, *FLOATING, "cassie", "arm", "four_bar"]
     parser.add_argument("robots", nargs="*", help=f"some of {', '.join(known)} (default: all)")
     parser.add_argument("--quick", action="store_true")
     arguments = parser.parse_args(argv)
@@ -372,6 +439,10 @@ def main(argv=None) -> int:
     for name in arguments.robots:
         if name in ROBOTS:
             row = run(name, folder / ROBOTS[name], quick=arguments.quick)
+        elif name in FLOATING:
+            row = run_floating(name, folder / FLOATING[name], quick=arguments.quick)
+        elif name == "cassie":
+            row = run_cassie(folder)
         elif importlib.util.find_spec("mujoco") is None:
             print(f"{name}: skipped (pip install mujoco)")
             continue
