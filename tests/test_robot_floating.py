@@ -194,3 +194,25 @@ def test_mjcf_free_and_ball_joints(tmp_path):
     q = np.array([system.robot.q_reference[name] for name in names])
     qdd = model.forward_dynamics(q, np.zeros(len(q))).qdd
     assert np.allclose(qdd, [0, 0, -9.81] + [0] * 8, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_cassie_loops_close_and_its_mobility_is_counted_right():
+    """Cassie (SDF as shipped, a floating pelvis and four ball joints closing the leg loops): the loops
+    close at the reference pose; their constraint ranks are 3, 3 (Achilles rods) and 2, 2 (the planar
+    foot four-bars: the left one's out-of-plane row is identically zero and dropped, the right one's is
+    planar only to ~7e-8 rad, and the rank policy of kronlag.numeric.tolerances counts it dependent);
+    the mobility 18 = 29 coordinates - 1 normalization - 10, against m - r = 17 (loading takes minutes:
+    the world-frame expressions of its 10-link chains are large)."""
+    bench = _bench()
+    folder = _folder(bench)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotFileWarning)
+        system = kronlag.load_sdf(folder / bench.CASSIE)
+    assert (len(system.bodies), len(system.coordinates)) == (23, 29)
+    assert system.robot.redundant == ["left-plantar-foot-joint.z"]
+    ranks, mobility, residual = bench.loop_ranks(system)
+    assert residual <= 1e-6, residual  # the file's poses are given to 5 digits
+    assert ranks == {"root_joint": 1, "left-pitch-rod-joint": 3, "right-pitch-rod-joint": 3,
+                     "right-plantar-foot-joint": 2, "left-plantar-foot-joint": 2}
+    assert mobility == 18

@@ -279,7 +279,7 @@ def mjcf_error(path) -> str:
 
 
 @pytest.mark.parametrize("body, equality, expected", [
-    (PENDULUM.replace('axis="0 1 0"', 'type="ball"'), "", r"<joint name='hinge'>: type 'ball': only hinge and slide"),
+    (PENDULUM.replace('axis="0 1 0"', 'type="screw"'), "", r"<joint name='hinge'>: type 'screw': the joint types are hinge, slide, ball, free"),
     (PENDULUM.replace('<inertial pos="0.5 0 0" mass="1" diaginertia="0.001 0.02 0.02"/>', '<geom size="0.1"/>'), "",
      r"<body name='arm'>: has geoms but no <inertial>"),
     (PENDULUM.replace('mass="1"', 'mass="-1"'), "", r"<body name='arm'>: <inertial>: mass = -1 .*must not be negative"),

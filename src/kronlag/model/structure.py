@@ -27,7 +27,7 @@ def describe(system: System) -> str:
     constraints by name, and the Grübler count ``m - r - s``.
 
     A system read from a robot file (``system.robot``) lists the file's joints: the moving ones
-    (one coordinate each), the fixed ones (merged into a body) and the mimic joints (a constraint).
+    (one coordinate each; floating, ball, planar and universal joints several), the fixed ones (merged into a body) and the mimic joints (a constraint).
     """
     m, r, s = len(system.coordinates), len(system.constraints), len(system.nonholonomic_constraints)
     robot = getattr(system, "robot", None)
@@ -39,8 +39,10 @@ def describe(system: System) -> str:
     if robot is not None:
         moving = [joint for joint in robot.joints if joint.coordinate]
         fixed = [joint for joint in robot.joints if not joint.coordinate]
-        lines.append(f"joints: {len(moving)} moving ({_counted(Counter(j.kind for j in moving))}), one coordinate "
-                     f"each" + (f"; {len(fixed)} fixed, merged: " + ", ".join(
+        counts = [len(joint.coordinates) or 1 for joint in moving]
+        each = "one coordinate each" if set(counts) <= {1} else f"{sum(counts)} coordinates"
+        lines.append(f"joints: {len(moving)} moving ({_counted(Counter(j.kind for j in moving))}), {each}"
+                     + (f"; {len(fixed)} fixed, merged: " + ", ".join(
                          f"{j.child} into {robot.body_of_link[j.child]}" for j in fixed) if fixed else ""))
         coupling = [f"{joint.name}.mimic ({joint.name} = {joint.mimic[1]:g} * {joint.mimic[0]} + {joint.mimic[2]:g})"
                     for joint in moving if joint.mimic]
