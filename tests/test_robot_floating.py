@@ -212,7 +212,7 @@ def test_cassie_loops_close_and_its_mobility_is_counted_right():
     assert (len(system.bodies), len(system.coordinates)) == (23, 29)
     assert system.robot.redundant == ["left-plantar-foot-joint.z"]
     ranks, mobility, residual = bench.loop_ranks(system)
-    assert residual <= 1e-6, residual  # the file's poses are given to 5 digits
+    assert residual <= 1e-12, residual
     assert ranks == {"root_joint": 1, "left-pitch-rod-joint": 3, "right-pitch-rod-joint": 3,
                      "right-plantar-foot-joint": 2, "left-plantar-foot-joint": 2}
     assert mobility == 18
