@@ -216,3 +216,23 @@ def test_cassie_loops_close_and_its_mobility_is_counted_right():
     assert ranks == {"root_joint": 1, "left-pitch-rod-joint": 3, "right-pitch-rod-joint": 3,
                      "right-plantar-foot-joint": 2, "left-plantar-foot-joint": 2}
     assert mobility == 18
+
+
+def test_long_chain_on_a_floating_base_keeps_its_rotations(tmp_path):
+    """More than MAX_ROTATION_FACTORS factors: the constant rotations are moved past the joints and
+    the Euler-parameter factor (C R(e) = R(e0, C e) C); each body's rotation still equals its link
+    frame's, evaluated at a random state."""
+    links = '  <link name="world"/>\n' + "".join(BODY.format(name=f"l{k}", c="0.1 0 0") for k in range(6))
+    joints = '  <joint name="base" type="floating"><parent link="world"/><child link="l0"/></joint>\n' + "".join(
+        f'  <joint name="j{k}" type="revolute"><parent link="l{k - 1}"/><child link="l{k}"/>'
+        f'<origin xyz="0.2 0 0" rpy="0.3 -0.4 {0.5 + k / 10}"/><axis xyz="0 1 0"/></joint>\n' for k in range(1, 6))
+    path = tmp_path / "chain.urdf"
+    path.write_text(f'<?xml version="1.0"?>\n<robot name="chain">\n{links}{joints}</robot>\n')
+    system = kronlag.load_urdf(path)
+    rng = np.random.default_rng(4)
+    point = dict(zip(system.coordinates, np.concatenate([rng.normal(size=3), unit(rng), rng.normal(size=5)])))
+    for body in system.bodies:
+        frame = system.robot.frames[body.name].rotation
+        assert np.allclose(np.array(body.rotation.xreplace(point), dtype=float),
+                           np.array(frame.xreplace(point), dtype=float), atol=1e-12), body.name
+    assert len(system.body("l5").rotation_sequence.factors) <= 16
