@@ -15,7 +15,7 @@ import sympy as sp
 
 import kronlag
 from kronlag.model.robot_formats import RobotFileWarning
-from kronlag.model.rotations import EULER_PARAMETERS, RotationSequence, euler_parameters
+from kronlag.model.rotations import EULER_PARAMETERS, RotationSequence
 
 BENCH = Path(__file__).resolve().parents[1] / "bench" / "bench_robots.py"
 

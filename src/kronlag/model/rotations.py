@@ -288,7 +288,7 @@ class RotationSequence:
         """``[(w_k, angle_k)]`` with ``w_k = (R_{k+1} ... R_n)^T u_k``, the axis of factor k in the body
         frame, so that ``omega_body = sum_k w_k d(angle_k)/dt`` (an Euler-parameter factor gives four
         pairs ``((R_{k+1} ... R_n)^T 2 G(e)[:, j], e_j)``, whose ``w`` vary with e)."""
-        result = []
+        result: list[tuple[sp.ImmutableMatrix, sp.Expr]] = []
         tail = sp.eye(3)
         for k in reversed(range(len(self.factors))):
             axis, angle = self.factors[k]

@@ -35,7 +35,7 @@ from .description import JointLimits
 from .mjcf import add_rows
 from .safe_xml import XmlDocument, numbers, read_xml
 from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build_system, check_inertia,
-                   orientation_rows, relative_frames, report_skipped, robot_of, rpy_matrix, rpy_of)
+                   orientation_rows, relative_frames, report_skipped, rpy_matrix, rpy_of)
 
 __all__ = ["load_sdf"]
 
