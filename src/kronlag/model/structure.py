@@ -54,7 +54,11 @@ def describe(system: System) -> str:
         lines.append(f"constraint joints: {len(system.joints)} ({_counted(Counter(j.kind for j in system.joints))}): "
                      + ", ".join(f"{joint.name} ({len(joint.constraint_names)} rows)" for joint in system.joints))
     named = {name for joint in system.joints for name in joint.constraint_names}
-    others = [c.name for c in system.constraints if c.name not in named and not c.name.endswith(".mimic")]
+    normalizing = [c.name for c in system.constraints if robot is not None and c.name.endswith(".normalization")]
+    if normalizing:
+        lines.append("Euler-parameter normalizations (floating and ball joints): " + ", ".join(normalizing))
+    others = [c.name for c in system.constraints
+              if c.name not in named and not c.name.endswith(".mimic") and c.name not in normalizing]
     if others:
         lines.append(("loop-closing and coupling constraints: " if robot is not None else "other constraints: ")
                      + ", ".join(others))
