@@ -126,6 +126,7 @@ def test_sdf_ball_joint_and_floating_model(tmp_path):
     system = kronlag.load_sdf(sdf(tmp_path, SDF_BODY + joint))
     assert [q.name for q in system.coordinates] == [f"socket_e{k}" for k in range(4)]
     assert [c.name for c in system.constraints] == ["socket.normalization"]
+    assert "Euler-parameter normalizations (floating and ball joints): socket.normalization" in system.describe()
     model = kronlag.derive(system).numeric(system.robot.values)
     angle = 0.3  # turned about x: the bob swings up by 1 - cos(angle); the weight's torque m g sin(angle)
     q = [np.cos(angle / 2), np.sin(angle / 2), 0, 0]
