@@ -17,6 +17,10 @@ exact solution of ``M qdd + Phi_q^T lambda = tau - nle``, ``Phi_q qdd = 0`` buil
 Pinocchio's M and nle).  Continuous joints have Pinocchio coordinates ``(cos q, sin q)``.  The
 relative difference is ``max |kronlag - pinocchio| / max(1, max |pinocchio|)`` over the states.
 
+Floating-base robots (``FLOATING``: Solo 12, A1, Go2, Talos) are read with ``floating_base=True``
+and compared with Pinocchio's free flyer (:class:`FloatingReference` documents the map of the
+coordinates); Cassie's SDF row gives its loops' ranks and mobility at the reference pose.
+
 With ``pip install mujoco`` two MJCF rows follow (``tests/robot_files``): the spatial arm
 ``arm.xml`` read with ``kronlag.load_mjcf`` against ``mj_fullM`` and ``qfrc_bias`` (FD timed
 against ``mj_forward``, which does more: collisions, sensors), and the four-bar ``four_bar.xml``
@@ -48,6 +52,15 @@ ROBOTS = {
     "double_pendulum": "double_pendulum_description/urdf/double_pendulum.urdf",
     "xarm7": "xarm_description/urdf/xarm7.urdf",
     "ur3": "ur_description/urdf/ur3_robot.urdf",
+}
+
+#: Floating-base robots: read with ``load_urdf(path, floating_base=True)``, against Pinocchio's
+#: ``buildModelFromUrdf(path, JointModelFreeFlyer())`` (:class:`FloatingReference`).
+FLOATING = {
+    "solo12": "solo_description/robots/solo12.urdf",
+    "a1": "a1_description/urdf/a1.urdf",
+    "go2": "go2_description/urdf/go2.urdf",
+    "talos": "talos_data/robots/talos_reduced.urdf",
 }
 
 
@@ -105,6 +118,121 @@ class PinocchioReference:
                 "aba": self.back(pin.aba(model, data, pq, pv, ptau).copy())}
 
 
+class FloatingReference:
+    """Pinocchio's free-flyer model of a URDF and the map from kronlag's coordinates to its q and v.
+
+    kronlag's floating base has the coordinates ``p`` (the root link's origin in the world) and the
+    Euler parameters ``e = (e0, e1, e2, e3)``; Pinocchio's free flyer ``q = (p, x y z w)`` with the
+    quaternion ``(e1, e2, e3, e0)`` and ``v = (R^T pd, omega)``, both in the base frame, where
+    ``omega = 2 G(e) ed`` (:func:`kronlag.model.rotations.euler_parameter_rates`).  On the constraint
+    manifold (``|e| = 1``, ``e . ed = 0``) kronlag's speeds are ``qd = S v`` with
+    ``S = diag(R, G^T / 2, I)`` (``G G^T = I``), so the kinetic energy gives ``M_pin = S^T M S``, the
+    generalized forces ``g_pin = S^T g`` and ``C_pin v = S^T (M Sd v + C qd)`` with ``Sd v =
+    (R [omega]x v_lin, G(ed)^T omega / 2, 0)``; the accelerations map back as ``a_lin = R^T pdd -
+    omega x v_lin``, ``omega_d = 2 G(e) edd`` (``G(ed) ed = 0``).  The rows of kronlag's ``S^T``
+    annihilate the normalization constraint's gradient ``2 e``, so its multiplier does not enter.
+    """
+
+    def __init__(self, path: Path, system: kronlag.System):
+        import pinocchio as pin
+
+        self.pin = pin
+        self.model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+        self.data = self.model.createData()
+        base = system.robot.joint("root_joint").coordinates
+        index = {q.name: k for k, q in enumerate(system.coordinates)}
+        self.base = [index[name] for name in base]
+        self.slots = []  # (kronlag index, pinocchio q index, v index, nq) per joint coordinate
+        for joint in system.robot.joints:
+            if joint.coordinate and joint.name != "root_joint":
+                peer = self.model.joints[self.model.getJointId(joint.name)]
+                self.slots.append((index[joint.coordinate], peer.idx_q, peer.idx_v, peer.nq))
+        if sorted(slot[2] for slot in self.slots) != list(range(6, self.model.nv)):
+            raise RuntimeError(f"{path}: the joints of kronlag and Pinocchio do not match")
+
+    def random_state(self, rng, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """kronlag's ``q`` (a random unit e) and Pinocchio's ``v`` (random)."""
+        q = rng.uniform(-1.5, 1.5, m)
+        e = rng.normal(size=4)
+        q[self.base[3:]] = e / np.linalg.norm(e)
+        return q, rng.uniform(-2, 2, self.model.nv)
+
+    def _rotation(self, q):
+        e0, e1, e2, e3 = q[self.base[3:]]
+        rates = np.array([[-e1, e0, e3, -e2], [-e2, -e3, e0, e1], [-e3, e2, -e1, e0]])
+        vector = np.array([e1, e2, e3])
+        skew = np.array([[0, -e3, e2], [e3, 0, -e1], [-e2, e1, 0]])
+        return (e0 ** 2 - vector @ vector) * np.eye(3) + 2 * (np.outer(vector, vector) + e0 * skew), rates
+
+    def S(self, q) -> np.ndarray:
+        """``qd = S v`` (kronlag speeds of Pinocchio's v), shape (m, nv)."""
+        rotation, rates = self._rotation(q)
+        result = np.zeros((len(q), self.model.nv))
+        result[np.ix_(self.base[:3], range(3))] = rotation
+        result[np.ix_(self.base[3:], range(3, 6))] = rates.T / 2
+        for k, _, iv, _ in self.slots:
+            result[k, iv] = 1.0
+        return result
+
+    def q(self, q: np.ndarray) -> np.ndarray:
+        result = np.zeros(self.model.nq)
+        e0, e1, e2, e3 = q[self.base[3:]]
+        result[:7] = (*q[self.base[:3]], e1, e2, e3, e0)
+        for k, iq, _, nq in self.slots:
+            result[iq:iq + nq] = (np.cos(q[k]), np.sin(q[k])) if nq == 2 else q[k]
+        return result
+
+    def tau(self, system: kronlag.System, values: dict) -> np.ndarray:
+        """Pinocchio's joint torques of kronlag's parameter values (the base is not actuated)."""
+        result = np.zeros(self.model.nv)
+        for joint in system.robot.joints:
+            if joint.torque:
+                result[next(iv for k, _, iv, _ in self.slots if system.coordinates[k].name == joint.coordinate)] = \
+                    values[joint.torque]
+        return result
+
+    def compare(self, model, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> dict[str, float]:
+        """The relative differences of M, g, C qd and the accelerations at ``(q, v)``."""
+        pin, peer, data = self.pin, self.model, self.data
+        S, (rotation, rates) = self.S(q), self._rotation(q)
+        qd = S @ v
+        rates_dot = self._rotation(np.where(np.isin(np.arange(len(q)), self.base[3:]), qd, 0.0))[1]
+        S_dot_v = np.zeros(len(q))
+        S_dot_v[self.base[:3]] = rotation @ np.cross(v[3:6], v[:3])
+        S_dot_v[self.base[3:]] = rates_dot.T @ v[3:6] / 2
+        pq = self.q(q)
+        mass = pin.crba(peer, data, pq)
+        mass = np.triu(mass) + np.triu(mass, 1).T
+        gravity = pin.computeGeneralizedGravity(peer, data, pq).copy()
+        bias = pin.nonLinearEffects(peer, data, pq, v).copy() - gravity
+        accelerations = pin.aba(peer, data, pq, v, tau).copy()
+        ours_mass = model.M(q)
+        qdd = model.forward_dynamics(q, qd).qdd
+        nu_dot = np.zeros(peer.nv)
+        nu_dot[:3] = rotation.T @ qdd[self.base[:3]] - np.cross(v[3:6], v[:3])
+        nu_dot[3:6] = 2 * rates @ qdd[self.base[3:]]
+        for k, _, iv, _ in self.slots:
+            nu_dot[iv] = qdd[k]
+        pairs = {"M": (S.T @ ours_mass @ S, mass), "g": (S.T @ model.g(q), gravity),
+                 "Cqd": (S.T @ (ours_mass @ S_dot_v + model.Cqd(q, qd)), bias), "qdd": (nu_dot, accelerations)}
+        return {key: float(np.abs(ours - theirs).max()) / max(1.0, float(np.abs(theirs).max()))
+                for key, (ours, theirs) in pairs.items()}
+
+
+def compare_floating(path: Path, system: kronlag.System, model, values: dict, *, states: int = 5,
+                     seed: int = 1) -> dict[str, float]:
+    """The largest relative differences to Pinocchio's free-flyer model at random states."""
+    reference = FloatingReference(path, system)
+    rng = np.random.default_rng(seed)
+    tau = reference.tau(system, values)
+    worst = {"M": 0.0, "g": 0.0, "Cqd": 0.0, "qdd": 0.0}
+    for _ in range(states):
+        q, v = reference.random_state(rng, len(system.coordinates))
+        for key, value in reference.compare(model, q, v, tau).items():
+            worst[key] = max(worst[key], value)
+    return worst
+
+
 def constrained_accelerations(mass, rhs, jacobian) -> np.ndarray:
     """``qdd`` of ``M qdd + J^T lambda = rhs``, ``J qdd = 0`` (constant-coefficient constraints)."""
     m, r = mass.shape[0], jacobian.shape[0]
@@ -143,6 +271,69 @@ def compare(path: Path, system: kronlag.System, model, tau: np.ndarray, *, state
             scale = max(1.0, float(np.abs(theirs[key]).max()))
             worst[key] = max(worst[key], float(np.abs(ours[key] - theirs[key]).max()) / scale)
     return worst
+
+
+def run_floating(name: str, path: Path, *, quick: bool, backend: str = "auto") -> dict:
+    """A floating-base row: ``load_urdf(path, floating_base=True)`` against Pinocchio's free flyer
+    (:func:`compare_floating`); FD timed against ``aba`` at a random state."""
+    start = time.perf_counter()
+    system = kronlag.load_urdf(path, floating_base=True)
+    loaded = time.perf_counter()
+    equations = kronlag.derive(system)
+    derived = time.perf_counter()
+    rng = np.random.default_rng(7)
+    values = {**system.robot.values, **{joint.torque: rng.uniform(-1, 1) for joint in system.robot.joints
+                                        if joint.torque}}
+    model = equations.numeric(values, backend=backend)
+    built = time.perf_counter()
+    worst = compare_floating(path, system, model, values)
+    reference = FloatingReference(path, system)
+    q, v = reference.random_state(rng, len(system.coordinates))
+    qd, pq, ptau = reference.S(q) @ v, reference.q(q), reference.tau(system, values)
+    number = 200 if quick else 20000
+    ours = per_call(lambda: model.forward_dynamics(q, qd), number=number)
+    theirs = per_call(lambda: reference.pin.aba(reference.model, reference.data, pq, v, ptau), number=number)
+    return {"robot": name, "bodies": len(system.bodies), "coordinates": len(system.coordinates),
+            "constraints": len(system.constraints), "mobility": model.mobility(q), "load_s": loaded - start,
+            "derive_s": derived - loaded, "build_s": built - derived, "max_rel": max(worst.values()),
+            "worst": max(worst, key=worst.get), "fd_us": ours, "aba_us": theirs}
+
+
+#: Cassie's closed-loop SDF (floating pelvis, four ball-joint loops).
+CASSIE = "cassie_description/robots/cassie_v2.sdf"
+
+
+def loop_ranks(system: kronlag.System) -> tuple[dict[str, int], int, float]:
+    """The rank of each loop-closing joint's rows, the mobility (the rank policy of
+    ``kronlag.numeric.tolerances``) and the largest residual, from ``Phi`` and ``Phi_q`` at the file's
+    reference pose, without deriving the dynamics."""
+    import sympy as sp
+
+    from kronlag.numeric.tolerances import RANK_RTOL, matrix_rank
+
+    reference = {q: system.robot.q_reference.get(q.name, 0.0) for q in system.coordinates}
+    rows = sp.Matrix([constraint.expression for constraint in system.constraints])
+    residual = float(np.abs(np.array(rows.xreplace(reference), dtype=float)).max())
+    jacobian = np.array(rows.jacobian(list(system.coordinates)).xreplace(reference), dtype=float)
+    loops: dict[str, list[int]] = {}
+    for index, constraint in enumerate(system.constraints):
+        loops.setdefault(constraint.name.rsplit(".", 1)[0], []).append(index)
+    ranks = {loop: matrix_rank(jacobian[rows_of], RANK_RTOL) for loop, rows_of in loops.items()}
+    return ranks, len(system.coordinates) - matrix_rank(jacobian, RANK_RTOL), residual
+
+
+def run_cassie(folder: Path) -> dict:
+    """Cassie's row: load time, the loops' ranks and the mobility at the reference pose (the
+    derivation of its dynamics is not timed here: it takes too long today)."""
+    start = time.perf_counter()
+    system = kronlag.load_sdf(folder / CASSIE)
+    loaded = time.perf_counter()
+    ranks, mobility, residual = loop_ranks(system)
+    print(f"cassie loops: {ranks}, residual at the reference {residual:.2e}")
+    return {"robot": "cassie_v2.sdf", "bodies": len(system.bodies), "coordinates": len(system.coordinates),
+            "constraints": len(system.constraints), "mobility": mobility, "load_s": loaded - start,
+            "derive_s": float("nan"), "build_s": float("nan"), "max_rel": float("nan"), "worst": "-",
+            "fd_us": float("nan"), "aba_us": float("nan")}
 
 
 def per_call(function, *, number: int) -> float:
@@ -228,7 +419,7 @@ def run_mjcf(name: str, *, quick: bool) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    known = [*ROBOTS, "arm", "four_bar"]
+    known = [*ROBOTS, *FLOATING, "cassie", "arm", "four_bar"]
     parser.add_argument("robots", nargs="*", help=f"some of {', '.join(known)} (default: all)")
     parser.add_argument("--quick", action="store_true")
     arguments = parser.parse_args(argv)
@@ -248,6 +439,10 @@ def main(argv=None) -> int:
     for name in arguments.robots:
         if name in ROBOTS:
             row = run(name, folder / ROBOTS[name], quick=arguments.quick)
+        elif name in FLOATING:
+            row = run_floating(name, folder / FLOATING[name], quick=arguments.quick)
+        elif name == "cassie":
+            row = run_cassie(folder)
         elif importlib.util.find_spec("mujoco") is None:
             print(f"{name}: skipped (pip install mujoco)")
             continue

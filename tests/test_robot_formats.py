@@ -122,11 +122,6 @@ def test_unknown_joint_type(tmp_path):
     assert re.search(r"robot\.urdf:\d+: <joint name='j1'>: unknown joint type 'hinge'", error_of(path))
 
 
-def test_floating_joint_is_reported_not_supported(tmp_path):
-    path = urdf(tmp_path, '  <link name="base"/>\n', link("a"), joint("j1", "base", "a", kind="floating"))
-    assert "not supported by the URDF reader yet" in error_of(path)
-
-
 def test_mimic_of_unknown_joint(tmp_path):
     path = urdf(tmp_path, '  <link name="base"/>\n', link("a"), joint("j1", "base", "a"), link("b"),
                 joint("j2", "base", "b", extra='<mimic joint="nope"/>'))
@@ -284,7 +279,7 @@ def mjcf_error(path) -> str:
 
 
 @pytest.mark.parametrize("body, equality, expected", [
-    (PENDULUM.replace('axis="0 1 0"', 'type="ball"'), "", r"<joint name='hinge'>: type 'ball': only hinge and slide"),
+    (PENDULUM.replace('axis="0 1 0"', 'type="screw"'), "", r"<joint name='hinge'>: unknown joint type 'screw'; MJCF joint types are hinge, slide, ball, free"),
     (PENDULUM.replace('<inertial pos="0.5 0 0" mass="1" diaginertia="0.001 0.02 0.02"/>', '<geom type="mesh"/>'), "",
      r"<geom>: type 'mesh': kronlag computes inertia from sphere"),
     (PENDULUM.replace('mass="1"', 'mass="-1"'), "", r"<body name='arm'>: <inertial>: mass = -1 .*must not be negative"),
@@ -415,8 +410,9 @@ SDF_HINGE = ('<joint name="hinge" type="revolute"><parent>world</parent><child>a
 
 
 @pytest.mark.parametrize("model, expected", [
-    (SDF_LINK, r"no joint fixes the model to 'world': a floating base is not supported yet"),
-    (SDF_LINK + SDF_HINGE.replace('type="revolute"', 'type="ball"'), r"<joint name='hinge'>: type 'ball' in the tree"),
+    (SDF_LINK + SDF_LINK.replace('"arm"', '"leg"'), r"<link name='leg'>: a second root link"),
+    (SDF_LINK + SDF_HINGE.replace('type="revolute"', 'type="gearbox"'),
+     r"<joint name='hinge'>: type 'gearbox' in the tree"),
     (SDF_LINK + SDF_HINGE.replace("<child>arm", "<child>nope"), r"<child>nope</child> is not a link"),
     (SDF_LINK.replace("<link name=\"arm\">", '<link name="arm"><pose relative_to="nowhere">0 0 0 0 0 0</pose>')
      + SDF_HINGE, r"relative_to='nowhere' is not a link or joint"),

@@ -105,6 +105,15 @@ def _quaternion_rate(e, omega):
     return np.concatenate([[-0.5 * omega @ v], 0.5 * (e0 * omega + np.cross(omega, v))])
 
 
+def test_absolute_coordinates_refuse_joints_of_several_coordinates(tmp_path):
+    """A floating base has seven coordinates: absolute coordinates (one-coordinate joints as rows)
+    refuse it in one located line instead of treating it as a revolute joint."""
+    path = tmp_path / "arm.urdf"
+    path.write_text(ARM)
+    with pytest.raises(ModelFileError, match=r"arm\.urdf:.*the floating joint 'root_joint' has 7 coordinates"):
+        kronlag.load_urdf(path, coordinates="absolute", floating_base=True)
+
+
 @pytest.mark.slow
 def test_absolute_coordinates_give_the_same_motion(tmp_path):
     """An arm with a tilted revolute, a general-axis revolute and a prismatic joint, actuated: read in

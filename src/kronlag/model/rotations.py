@@ -6,8 +6,8 @@ Rotation matrices ``R`` map body-frame components to world components (``r_world
   :func:`axis_angle` (Rodrigues), :func:`euler_sequence` (Euler/Cardan angles, intrinsic or
   extrinsic) and :func:`euler_parameters` (unit quaternion ``e0, e1, e2, e3``, whose normalization
   constraint :func:`euler_parameter_constraint` returns);
-- :class:`RotationSequence`: a product of elementary rotations whose body-frame angular velocity
-  needs no simplification;
+- :class:`RotationSequence`: a product of elementary rotations (and rotations by Euler parameters,
+  :data:`EULER_PARAMETERS`) whose body-frame angular velocity needs no simplification;
 - :func:`check_rotation`: orthogonal with determinant +1, symbolically where cheap, else numerically.
 """
 
@@ -31,6 +31,8 @@ __all__ = [
     "euler_parameters",
     "euler_parameter_constraint",
     "euler_parameters_of",
+    "euler_parameter_rates",
+    "EULER_PARAMETERS",
     "skew",
     "RotationSequence",
     "MAX_ROTATION_FACTORS",
@@ -141,6 +143,19 @@ def euler_parameter_constraint(e0, e1, e2, e3) -> sp.Expr:
     return e0 ** 2 + e1 ** 2 + e2 ** 2 + e3 ** 2 - 1
 
 
+def euler_parameter_rates(e0, e1, e2, e3) -> sp.Matrix:
+    """``G(e)`` (3x4) with the body-frame angular velocity ``omega = 2 G(e) edot`` of the rotation
+    :func:`euler_parameters` (on the unit sphere; ``G(e) e = 0`` and ``G G^T = |e|^2 I``).
+
+    >>> euler_parameter_rates(1, 0, 0, 0)
+    Matrix([
+    [0, 1, 0, 0],
+    [0, 0, 1, 0],
+    [0, 0, 0, 1]])
+    """
+    return sp.Matrix([[-e1, e0, e3, -e2], [-e2, -e3, e0, e1], [-e3, e2, -e1, e0]])
+
+
 def euler_parameters_of(rotation) -> np.ndarray:
     """Euler parameters ``(e0, e1, e2, e3)``, ``e0 >= 0``, of a numeric rotation matrix, shape (4,).
 
@@ -179,6 +194,11 @@ _UNIT_ROUNDING = 1e-15
 
 _PRINCIPAL_AXES = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1)}
 
+#: The "axis" of a :class:`RotationSequence` factor that turns by Euler parameters: the factor
+#: ``(EULER_PARAMETERS, (e0, e1, e2, e3))`` is :func:`euler_parameters` ``(e0, e1, e2, e3)`` (a ball
+#: joint or a floating base without gimbal lock; add :func:`euler_parameter_constraint`).
+EULER_PARAMETERS = "euler_parameters"
+
 
 @dataclass(frozen=True)
 class RotationSequence:
@@ -190,10 +210,15 @@ class RotationSequence:
 
         omega_body = sum_k (R_{k+1} ... R_n)^T u_k d(angle_k)/dt
 
+    A factor ``(EULER_PARAMETERS, (e0, e1, e2, e3))`` is the rotation by Euler parameters
+    (:func:`euler_parameters`); it adds ``(R_{k+1} ... R_n)^T 2 G(e) edot``
+    (:func:`euler_parameter_rates`), four terms with the "axes" ``2 G(e)[:, j]`` and "angles" ``e_j``.
+
     Parameters
     ----------
     factors : sequence of (axis, angle)
-        ``axis`` is ``"x"``, ``"y"``, ``"z"`` or a constant unit 3-vector; at most
+        ``axis`` is ``"x"``, ``"y"``, ``"z"`` or a constant unit 3-vector, or
+        :data:`EULER_PARAMETERS` with four expressions as the "angle"; at most
         :data:`MAX_ROTATION_FACTORS` factors.
 
     Examples
@@ -204,7 +229,7 @@ class RotationSequence:
     Matrix([[0, sin(theta), cos(theta)]])
     """
 
-    factors: tuple[tuple[sp.ImmutableMatrix, sp.Expr], ...]
+    factors: tuple[tuple[sp.ImmutableMatrix | str, sp.Expr | sp.ImmutableMatrix], ...]
 
     def __init__(self, factors, *, what: str = "rotation sequence"):
         if isinstance(factors, str) or not isinstance(factors, Iterable):
@@ -220,6 +245,9 @@ class RotationSequence:
             if isinstance(pair, str) or not isinstance(pair, Sequence) or len(pair) != 2:
                 raise ModelError(f"{what} factor {k}: expected a pair (axis, angle), got {pair!r}")
             axis, angle = pair
+            if isinstance(axis, str) and axis == EULER_PARAMETERS:
+                checked.append((axis, as_vector(angle, f"{what} factor {k} Euler parameters", (4,))))
+                continue
             if isinstance(axis, str):
                 if axis not in _PRINCIPAL_AXES:
                     raise ModelError(f"{what} factor {k}: axis must be 'x', 'y', 'z' or a unit 3-vector, "
@@ -236,11 +264,14 @@ class RotationSequence:
     @property
     def axis_names(self) -> tuple[str | None, ...]:
         """The name ``"x"``, ``"y"`` or ``"z"`` of each factor's axis, ``None`` for another axis."""
-        return tuple(next((name for name, unit in _PRINCIPAL_AXES.items() if list(axis) == list(unit)), None)
+        return tuple(next((name for name, unit in _PRINCIPAL_AXES.items()
+                           if not isinstance(axis, str) and list(axis) == list(unit)), None)
                      for axis, _ in self.factors)
 
     def _factor_matrix(self, k: int) -> sp.ImmutableMatrix:
         axis, angle = self.factors[k]
+        if isinstance(axis, str):  # EULER_PARAMETERS
+            return sp.ImmutableMatrix(euler_parameters(*angle))
         principal = self.axis_names[k]
         rotation = axis_angle(axis, angle) if principal is None else elementary_rotation(principal, angle)
         return sp.ImmutableMatrix(rotation)
@@ -255,12 +286,17 @@ class RotationSequence:
 
     def body_axes(self) -> list[tuple[sp.ImmutableMatrix, sp.Expr]]:
         """``[(w_k, angle_k)]`` with ``w_k = (R_{k+1} ... R_n)^T u_k``, the axis of factor k in the body
-        frame, so that ``omega_body = sum_k w_k d(angle_k)/dt``."""
-        result = []
+        frame, so that ``omega_body = sum_k w_k d(angle_k)/dt`` (an Euler-parameter factor gives four
+        pairs ``((R_{k+1} ... R_n)^T 2 G(e)[:, j], e_j)``, whose ``w`` vary with e)."""
+        result: list[tuple[sp.ImmutableMatrix, sp.Expr]] = []
         tail = sp.eye(3)
         for k in reversed(range(len(self.factors))):
             axis, angle = self.factors[k]
-            result.append((sp.ImmutableMatrix(tail.T * axis), angle))
+            if isinstance(axis, str):  # EULER_PARAMETERS: 2 G(e) edot, one term per parameter
+                rates = 2 * tail.T * euler_parameter_rates(*angle)
+                result.extend((sp.ImmutableMatrix(rates[:, j]), angle[j]) for j in reversed(range(4)))
+            else:
+                result.append((sp.ImmutableMatrix(tail.T * axis), angle))
             tail = self._factor_matrix(k) * tail
         return result[::-1]
 

@@ -27,7 +27,7 @@ def describe(system: System) -> str:
     constraints by name, and the Grübler count ``m - r - s``.
 
     A system read from a robot file (``system.robot``) lists the file's joints: the moving ones
-    (one coordinate each), the fixed ones (merged into a body) and the mimic joints (a constraint).
+    (one coordinate each; floating, ball, planar and universal joints several), the fixed ones (merged into a body) and the mimic joints (a constraint).
     """
     m, r, s = len(system.coordinates), len(system.constraints), len(system.nonholonomic_constraints)
     robot = getattr(system, "robot", None)
@@ -39,8 +39,10 @@ def describe(system: System) -> str:
     if robot is not None:
         moving = [joint for joint in robot.joints if joint.coordinate]
         fixed = [joint for joint in robot.joints if not joint.coordinate]
-        lines.append(f"joints: {len(moving)} moving ({_counted(Counter(j.kind for j in moving))}), one coordinate "
-                     f"each" + (f"; {len(fixed)} fixed, merged: " + ", ".join(
+        counts = [len(joint.coordinates) or 1 for joint in moving]
+        each = "one coordinate each" if set(counts) <= {1} else f"{sum(counts)} coordinates"
+        lines.append(f"joints: {len(moving)} moving ({_counted(Counter(j.kind for j in moving))}), {each}"
+                     + (f"; {len(fixed)} fixed, merged: " + ", ".join(
                          f"{j.child} into {robot.body_of_link[j.child]}" for j in fixed) if fixed else ""))
         coupling = [f"{joint.name}.mimic ({joint.name} = {joint.mimic[1]:g} * {joint.mimic[0]} + {joint.mimic[2]:g})"
                     for joint in moving if joint.mimic]
@@ -52,7 +54,11 @@ def describe(system: System) -> str:
         lines.append(f"constraint joints: {len(system.joints)} ({_counted(Counter(j.kind for j in system.joints))}): "
                      + ", ".join(f"{joint.name} ({len(joint.constraint_names)} rows)" for joint in system.joints))
     named = {name for joint in system.joints for name in joint.constraint_names}
-    others = [c.name for c in system.constraints if c.name not in named and not c.name.endswith(".mimic")]
+    normalizing = [c.name for c in system.constraints if robot is not None and c.name.endswith(".normalization")]
+    if normalizing:
+        lines.append("Euler-parameter normalizations (floating and ball joints): " + ", ".join(normalizing))
+    others = [c.name for c in system.constraints
+              if c.name not in named and not c.name.endswith(".mimic") and c.name not in normalizing]
     if others:
         lines.append(("loop-closing and coupling constraints: " if robot is not None else "other constraints: ")
                      + ", ".join(others))

@@ -75,7 +75,8 @@ def absolute_system(document: XmlDocument, joint_system: System) -> System:
     Raises
     ------
     ModelFileError
-        A moving link without mass (at the file's element).
+        A moving link without mass, or a joint of several coordinates (floating, ball, planar,
+        universal), at the file's element.
     """
     robot: RobotDescription = joint_system.robot  # type: ignore[assignment]
     zero = {q: 0 for q in joint_system.coordinates}
@@ -83,6 +84,11 @@ def absolute_system(document: XmlDocument, joint_system: System) -> System:
     bodies = {body.name: body for body in joint_system.bodies}
     moving = [joint for joint in robot.joints if joint.coordinate is not None]
     for joint in moving:
+        if len(joint.coordinates) > 1:
+            raise document.error(document.root, f"coordinates='absolute': the {joint.kind} joint {joint.name!r} has "
+                                                f"{len(joint.coordinates)} coordinates; absolute coordinates take "
+                                                "revolute, continuous and prismatic joints only: load this file in "
+                                                "joint coordinates")
         if joint.child not in bodies:
             raise document.error(document.root, f"coordinates='absolute': the link {joint.child!r} (moved by the "
                                                 f"joint {joint.name!r}) has no mass, so no coordinates of its own; "

@@ -51,12 +51,15 @@ class RobotJoint:
     origin : tuple of 6 floats
         ``x y z roll pitch yaw`` of the joint frame in the parent link's frame.
     coordinate : str or None
-        The coordinate the joint moves (``None`` for a fixed joint, merged into its parent).
+        The (first) coordinate the joint moves (``None`` for a fixed joint, merged into its parent).
     limits : JointLimits
     mimic : (joint, multiplier, offset) or None
         ``q = multiplier * q_joint + offset``, added as the holonomic constraint ``"<name>.mimic"``.
     torque : str or None
         The parameter of the joint's actuator torque or force (``"tau_<coordinate>"``).
+    coordinates : tuple of str
+        All its coordinates: one, or those of a floating, ball, planar or universal joint
+        (``<name>_x``, ..., ``<name>_e0 .. _e3``; see :mod:`.tree`).
     """
 
     name: str
@@ -69,6 +72,7 @@ class RobotJoint:
     limits: JointLimits = JointLimits()
     mimic: tuple[str, float, float] | None = None
     torque: str | None = None
+    coordinates: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,9 @@ class RobotDescription:
     visuals : tuple of Visual
     frames : dict of str to Frame
         Every link's frame (origin and rotation, expressions of the coordinates) in the world.
+    local_frames : dict of str to (str, Frame)
+        Every link but the root: its parent link and its frame in the parent link's frame
+        (expressions of its joint's coordinates only).
     values : dict of str to float
         Default parameter values: ``g`` (9.81, or the magnitude of the file's gravity) and every
         actuator torque 0.
@@ -125,6 +132,7 @@ class RobotDescription:
     body_of_link: dict[str, str] = field(default_factory=dict)
     visuals: tuple[Visual, ...] = ()
     frames: dict[str, Frame] = field(default_factory=dict)
+    local_frames: dict[str, tuple[str, Frame]] = field(default_factory=dict)
     values: dict[str, float] = field(default_factory=dict)
     q_reference: dict[str, float] = field(default_factory=dict)
     skipped: str = ""

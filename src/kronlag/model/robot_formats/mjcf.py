@@ -20,8 +20,9 @@ with geoms is refused: inertia from geoms is not computed).  ``<option gravity>`
 
 A row that is identically zero (the out-of-plane row of a planar ``connect``) is dropped and listed
 in ``system.robot.redundant``; a row that is a nonzero constant cannot be closed (an error with the
-residual).  Hinge and slide joints are read; ``ball`` and ``free`` joints (and ``freejoint``) are
-refused (not supported yet), as is a ``ref`` other than 0.
+residual).  Hinge and slide joints are read, ``ball`` and ``free`` joints (and ``freejoint``) as the
+tree's ``ball`` and ``floating`` joints (Euler parameters, see :mod:`.tree`); a ``ref`` other than 0
+is refused.
 """
 
 from __future__ import annotations
@@ -42,12 +43,12 @@ from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build
 
 __all__ = ["load_mjcf", "add_rows"]
 
-#: MJCF's joint types (the reader turns hinge and slide joints into coordinates).
-_JOINT_TYPES = ("hinge", "slide", "ball", "free")
 #: Elements of a body the reader uses (the others are listed as skipped).
 _BODY_USED = {"body", "inertial", "joint", "geom"}
 #: Top-level elements the reader uses.
 _TOP_USED = {"compiler", "option", "default", "worldbody", "equality", "asset"}
+#: MJCF joint types and the tree joints they are (:data:`.tree.JOINT_COORDINATES`).
+_JOINT_KINDS = {"hinge": "revolute", "slide": "prismatic", "ball": "ball", "free": "floating"}
 #: A constraint row whose value is below this at every coordinate value is identically zero.
 _ZERO_ROW = 1e-12
 #: A loop is closed when every constraint row is below this; Gauss-Newton steps tried to close it.
@@ -306,11 +307,9 @@ def load_mjcf(path: str | Path, *, coordinates: str = "joint", package_paths: Se
         for index, joint in enumerate(joints):
             attributes = reader.attributes(joint, childclass)
             kind = "free" if joint.tag == "freejoint" else attributes.get("type", "hinge")
-            if kind not in _JOINT_TYPES:
+            if kind not in _JOINT_KINDS:
                 raise document.error(joint, f"unknown joint type {kind!r}; MJCF joint types are "
-                                            f"{', '.join(_JOINT_TYPES)}")
-            if kind not in ("hinge", "slide"):
-                raise document.error(joint, f"type {kind!r}: only hinge and slide joints are supported yet")
+                                            f"{', '.join(_JOINT_KINDS)}")
             if float(attributes.get("ref", "0")) != 0:
                 raise document.error(joint, "ref other than 0 is not supported (the reference pose is q = 0)")
             joint_name = joint.get("name") or f"{name}_joint{index}"
@@ -324,11 +323,11 @@ def load_mjcf(path: str | Path, *, coordinates: str = "joint", package_paths: Se
             low_high = reader.numbers(joint, attributes, "range", 2, default=(0, 0))
             limited = attributes.get("limited", "auto") == "true" or (
                 attributes.get("limited", "auto") == "auto" and low_high != (0.0, 0.0))
-            converted = tuple(reader.angle(x) for x in low_high) if kind == "hinge" else low_high
+            converted = tuple(reader.angle(x) for x in low_high) if kind in ("hinge", "ball") else low_high
             limits = JointLimits(lower=converted[0] if limited else None, upper=converted[1] if limited else None,
                                  damping=float(attributes.get("damping", 0)) or None,
                                  friction=float(attributes.get("frictionloss", 0)) or None)
-            specs.append(TreeJoint(joint, joint_name, "revolute" if kind == "hinge" else "prismatic", previous, link,
+            specs.append(TreeJoint(joint, joint_name, _JOINT_KINDS[kind], previous, link,
                                    origin, tuple(axis / np.linalg.norm(axis)), limits))
             joint_elements[joint_name] = joint
             links[link], inertials[link], shifts[link] = body, NO_MASS, np.zeros(3)

@@ -8,14 +8,18 @@ frame with ``expressed_in="__model__"`` (or the 1.6 ``<use_parent_model_frame>``
 frame in the System (``system.robot.frames``) is the frame of the joint that moves it.
 
 Joints are read in file order: the first joint naming a link as its child places it in the tree
-(``revolute``, ``continuous``, ``prismatic``: one coordinate; ``fixed``: merged), and a joint
+(``revolute``, ``continuous``, ``prismatic``: one coordinate; ``ball``: the Euler parameters
+``<joint>_e0 .. _e3``; ``universal``: ``<joint>_1`` about ``<axis>`` and ``<joint>_2`` about ``<axis2>``;
+``fixed``: merged; see :mod:`.tree`), and a joint
 whose child is already in the tree closes a loop: its constraints are added by name -
-``"<joint>.x"``, ``.y``, ``.z`` (the joint point of both links stays together; ``ball``),
+``"<joint>.x"``, ``.y``, ``.z`` (the joint point of both links stays together, components in the
+frame of the loop's nearest common ancestor link; ``ball``),
 ``.axis1``, ``.axis2`` (``revolute``: the axis of the child stays along the parent's), ``.cross``
 (``universal``: the two axes stay perpendicular), ``.rx .ry .rz`` (``fixed``).  Rows that are
 identically zero (the out-of-plane rows of a planar loop) are dropped and listed in
-``system.robot.redundant``.  The model's base is fixed by a joint to ``world``; a model without one
-is floating, which is not supported yet.
+``system.robot.redundant``.  A model whose root link no joint fixes to ``world`` has a floating
+base: the joint ``"root_joint"`` (``root_joint_x, _y, _z`` from the root link's pose in the file
+and the Euler parameters ``root_joint_e0 .. _e3``, with ``"root_joint.normalization"``).
 """
 
 from __future__ import annotations
@@ -32,11 +36,14 @@ from .description import JointLimits
 from .mjcf import add_rows
 from .safe_xml import XmlDocument, numbers, read_xml
 from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build_system, check_inertia,
-                   orientation_rows, report_skipped, robot_of, rpy_matrix, rpy_of)
+                   orientation_rows, relative_frames, report_skipped, rpy_matrix, rpy_of)
 
 __all__ = ["load_sdf"]
 
-_TREE_TYPES = {"revolute": "revolute", "continuous": "continuous", "prismatic": "prismatic", "fixed": "fixed"}
+_TREE_TYPES = {"revolute": "revolute", "continuous": "continuous", "prismatic": "prismatic", "fixed": "fixed",
+               "ball": "ball", "universal": "universal"}
+#: The floating joint of a model not fixed to the world (Pinocchio's name).
+ROOT_JOINT = "root_joint"
 _LOOP_TYPES = ("revolute", "continuous", "ball", "universal", "fixed")
 _MODEL = "__model__"
 
@@ -193,12 +200,14 @@ def load_sdf(path: str | Path, *, coordinates: str = "joint",
                                             f"{', '.join(_LOOP_TYPES)} joints")
             loops.append(name)
         elif kind not in _TREE_TYPES:
-            raise document.error(joint, f"type {kind!r} in the tree: supported are {', '.join(_TREE_TYPES)} "
-                                        f"(ball, universal and others only where they close a loop)")
+            raise document.error(joint, f"type {kind!r} in the tree: supported are {', '.join(_TREE_TYPES)}")
         else:
             parent_joint[child] = name
-    if "world" not in {(joints[j].findtext("parent") or "").strip() for j in parent_joint.values()}:
-        raise document.error(model, "no joint fixes the model to 'world': a floating base is not supported yet")
+    roots = [link for link in links if link not in parent_joint]
+    floating = "world" not in {(joints[j].findtext("parent") or "").strip() for j in parent_joint.values()}
+    if floating and len(roots) > 1:
+        raise document.error(links[roots[1]], f"a second root link: {len(roots)} links ({', '.join(roots)}) have "
+                                              "no parent joint; a model has one root, joined to every other link")
 
     frames = {"world": np.eye(4)}
     for link in links:
@@ -209,11 +218,15 @@ def load_sdf(path: str | Path, *, coordinates: str = "joint",
         joint = joints[name]
         parent = (joint.findtext("parent") or "").strip()
         kind = _TREE_TYPES[document.required(joint, "type")]
-        axis = (1.0, 0.0, 0.0) if kind == "fixed" else tuple(_axis(document, joint, frames[link]))
+        axis = (1.0, 0.0, 0.0) if kind in ("fixed", "ball") else tuple(_axis(document, joint, frames[link]))
+        axis2 = tuple(_axis(document, joint, frames[link], "axis2")) if kind == "universal" else None
         specs.append(TreeJoint(joint, name, kind, parent, link, _origin(np.linalg.inv(frames[parent]) @ frames[link]),
-                               axis, _limits(document, joint)))
+                               axis, _limits(document, joint), axis2=axis2))
     order = {name: index for index, name in enumerate(joints)}
     specs.sort(key=lambda spec: order[spec.name])
+    if floating:
+        specs.insert(0, TreeJoint(model, ROOT_JOINT, "floating", "world", roots[0], _origin(frames[roots[0]]),
+                                  (1.0, 0.0, 0.0)))
     visuals: list[VisualSpec] = []
     for link, element in links.items():
         for visual in element.findall("visual"):
@@ -250,8 +263,7 @@ def _close(document: XmlDocument, system: System, joint: Element, name: str, pos
     parent, child = ((joint.findtext(tag) or "").strip() for tag in ("parent", "child"))
     at = poses.of(name, joint)  # the joint frame, model coordinates at the reference
     rows = []
-    link_frames = robot_of(system).frames
-    frame_p, frame_c = link_frames[parent], link_frames[child]
+    frame_p, frame_c = relative_frames(system, parent, child)
     origin_p, rotation_p = sp.Matrix(frame_p.origin), sp.Matrix(frame_p.rotation)
     origin_c, rotation_c = sp.Matrix(frame_c.origin), sp.Matrix(frame_c.rotation)
     in_parent = np.linalg.inv(frames[parent]) @ at

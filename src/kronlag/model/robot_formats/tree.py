@@ -10,6 +10,14 @@ its child about the axis, a ``prismatic`` one slides it.  Each body's rotation i
 :class:`~kronlag.RotationSequence` of the placements' elementary rotations and the joint axes, so
 that its angular velocity needs no simplification; an angle that is the double nearest to a
 multiple of pi/2 is taken exactly (:func:`exact_angle`), which keeps the expressions small.
+
+Joints of several coordinates (:data:`JOINT_COORDINATES`), named ``<joint>_<suffix>``:
+``floating`` (a floating base: ``_x _y _z``, the translation in the joint frame, then the rotation
+by the Euler parameters ``_e0 .. _e3``, without gimbal lock), ``ball`` (Euler parameters), each with
+the constraint ``"<joint>.normalization"`` (``e0^2 + e1^2 + e2^2 + e3^2 = 1``); ``planar``
+(``_x _y`` along two unit vectors normal to the axis, ``_theta`` about it) and ``universal``
+(``_1`` about the axis, then ``_2`` about ``axis2``).  Their reference pose is the joint frame
+(``e0 = 1``, the other coordinates 0); they are passive (no torque parameter).
 """
 
 from __future__ import annotations
@@ -27,7 +35,8 @@ import sympy as sp
 from ...core.errors import InputError, ModelError
 from ..bodies import RigidBody
 from ..frames import GROUND, Frame
-from ..rotations import MAX_ROTATION_FACTORS, RotationSequence
+from ..rotations import (EULER_PARAMETERS, MAX_ROTATION_FACTORS, RotationSequence, euler_parameter_constraint,
+                         euler_parameters)
 from ..system import System
 from .absolute import COORDINATE_CHOICES, absolute_system
 from .description import JointLimits, RobotDescription, RobotFileWarning, RobotJoint, Visual, coordinate_name
@@ -43,7 +52,7 @@ def three(values: Sequence[float]) -> tuple[float, float, float]:
     x, y, z = values
     return x, y, z
 
-__all__ = ["Inertial", "NO_MASS", "TreeJoint", "at_reference", "build_system", "check_inertia", "combine", "moved",
+__all__ = ["Inertial", "NO_MASS", "JOINT_COORDINATES", "TreeJoint", "at_reference", "relative_frames", "build_system", "check_inertia", "combine", "moved",
            "orientation_rows", "report_skipped", "rpy_matrix", "rpy_of", "transform"]
 
 
@@ -113,11 +122,17 @@ def moved(part: Inertial, transform: np.ndarray) -> Inertial:
                      rotation @ part.tensor @ rotation.T)
 
 
+#: The coordinates of each kind of joint, by the suffix of their names (``""``: the joint's name).
+JOINT_COORDINATES = {"revolute": ("",), "continuous": ("",), "prismatic": ("",), "fixed": (),
+                     "floating": ("x", "y", "z", "e0", "e1", "e2", "e3"), "ball": ("e0", "e1", "e2", "e3"),
+                     "planar": ("x", "y", "theta"), "universal": ("1", "2")}
+
+
 @dataclass
 class TreeJoint:
-    """A joint of the tree as a reader gives it: ``kind`` ``revolute``, ``continuous``,
-    ``prismatic`` or ``fixed``; ``origin`` the joint frame in the parent link's frame
-    (``x y z roll pitch yaw``); ``axis`` a unit vector in the joint frame; ``mimic``
+    """A joint of the tree as a reader gives it: ``kind`` one of :data:`JOINT_COORDINATES`;
+    ``origin`` the joint frame in the parent link's frame (``x y z roll pitch yaw``); ``axis`` a
+    unit vector in the joint frame (``axis2`` the second of a universal joint); ``mimic``
     ``(leader, multiplier, offset)`` declared by ``mimic_element``; ``element`` names it in errors."""
 
     element: Element
@@ -130,12 +145,13 @@ class TreeJoint:
     limits: JointLimits = JointLimits()
     mimic: tuple[str, float, float] | None = None
     mimic_element: Element | None = None
+    axis2: tuple[float, float, float] | None = None
 
 
-def _joint_factors(joint: TreeJoint, coordinate: sp.Symbol) -> list[tuple[object, sp.Expr]]:
-    """The rotation of a revolute or continuous joint as RotationSequence factors: about its axis, a
-    principal axis where the axis is one."""
-    axis = np.array(joint.axis)
+def _joint_factors(axis_of_joint: Sequence[float], coordinate: sp.Symbol) -> list[tuple[object, sp.Expr]]:
+    """The rotation about a joint axis as RotationSequence factors: about its axis, a principal axis
+    where the axis is one."""
+    axis = np.array(axis_of_joint)
     for index, name in enumerate("xyz"):
         if abs(axis[index]) == 1.0:
             return [(name, coordinate if axis[index] > 0 else -coordinate)]
@@ -144,6 +160,47 @@ def _joint_factors(joint: TreeJoint, coordinate: sp.Symbol) -> list[tuple[object
     turn = [("z", exact_angle(phi)), ("y", exact_angle(theta))]
     back = [("y", exact_angle(-theta)), ("z", exact_angle(-phi))]
     return [factor for factor in (*turn, ("z", coordinate), *back) if factor[1] != 0]
+
+
+def _plane(axis: Sequence[float]) -> tuple[sp.Matrix, sp.Matrix]:
+    """Two unit vectors ``u, v`` normal to ``axis`` with ``u x v = axis``: for the axis z, x and y (the
+    next principal axes in cyclic order; projected onto the plane for a general axis)."""
+    normal = np.array(axis, dtype=float)
+    helper = np.eye(3)[(int(np.argmax(np.abs(normal))) + 1) % 3]
+    u = helper - (helper @ normal) * normal
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    return tuple(sp.Matrix([sp.Integer(round(x)) if abs(x - round(x)) < 1e-15 else sp.Float(x) for x in w])
+                 for w in (u, v))
+
+
+def _moves(factor) -> bool:
+    """Whether a RotationSequence factor varies with the coordinates."""
+    return factor[0] == EULER_PARAMETERS or bool(factor[1].free_symbols)
+
+
+def _step(spec: TreeJoint, coordinates: list[sp.Symbol], origin: sp.Matrix,
+          rotation: sp.Matrix) -> tuple[sp.Matrix, list, sp.Matrix]:
+    """The child frame of a moving joint whose frame is ``(origin, rotation)``: its origin, its
+    rotation's factors after the joint frame's, and its rotation."""
+    kind = spec.kind
+    if kind == "prismatic":
+        return origin + rotation * sp.Matrix(spec.axis) * coordinates[0], [], rotation
+    if kind in ("floating", "planar"):
+        if kind == "floating":
+            shift = sp.Matrix(coordinates[:3])
+        else:
+            u, v = _plane(spec.axis)
+            shift = u * coordinates[0] + v * coordinates[1]
+        origin = origin + rotation * shift
+    if kind in ("floating", "ball"):
+        e = tuple(coordinates[-4:])
+        return origin, [(EULER_PARAMETERS, e)], rotation * euler_parameters(*e)
+    step = _joint_factors(spec.axis, coordinates[-1] if kind == "planar" else coordinates[0])
+    if kind == "universal":
+        assert spec.axis2 is not None  # a reader that makes a universal joint gives its second axis
+        step = step + _joint_factors(spec.axis2, coordinates[1])
+    return origin, step, rotation * RotationSequence(step).matrix
 
 
 @dataclass
@@ -169,6 +226,9 @@ def _body_rotation(placement: _Placement):
     if len(factors) > MAX_ROTATION_FACTORS:
         moved, constant = [], np.eye(3)
         for axis, angle in factors:
+            if axis == EULER_PARAMETERS:  # C R(e0, e) = R(e0, C e) C
+                moved.append((axis, (angle[0], *(sp.Matrix(constant) * sp.Matrix(angle[1:])))))
+                continue
             unit = np.array(_PRINCIPAL[axis] if isinstance(axis, str) else axis, dtype=float)
             if angle.free_symbols:
                 moved.append((tuple(sp.Float(x) for x in constant @ unit / np.linalg.norm(constant @ unit)), angle))
@@ -198,7 +258,7 @@ def _compact(factors: list) -> list:
         run.clear()
 
     for factor in factors:
-        if factor[1].free_symbols:
+        if _moves(factor):
             flush()
             result.append(factor)
         else:
@@ -281,46 +341,53 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
     if not moving:
         raise document.error(document.root, "has no moving joint: nothing to simulate")
     taken: set[str] = set()
-    coordinate_of: dict[str, sp.Symbol] = {}
+    coordinates_of: dict[str, list[sp.Symbol]] = {}
     for spec in moving:
-        symbol = coordinate_name(spec.name, taken)
-        taken.update({symbol, symbol + "d", symbol + "dd"})
-        coordinate_of[spec.name] = sp.Symbol(symbol)
+        coordinates_of[spec.name] = []
+        for suffix in JOINT_COORDINATES[spec.kind]:
+            symbol = coordinate_name(f"{spec.name}_{suffix}" if suffix else spec.name, taken)
+            taken.update({symbol, symbol + "d", symbol + "dd"})
+            coordinates_of[spec.name].append(sp.Symbol(symbol))
+    coordinate_of = {name: symbols[0] for name, symbols in coordinates_of.items() if len(symbols) == 1}
     for spec in moving:
-        if spec.mimic is not None and (spec.mimic[0] not in coordinate_of or spec.mimic[0] == spec.name):
-            known = "a fixed joint" if any(s.name == spec.mimic[0] for s in specs) else "not a joint of the file"
+        if spec.mimic is not None and (spec.mimic[0] not in coordinate_of or spec.mimic[0] == spec.name
+                                       or spec.name not in coordinate_of):
+            known = ("a fixed joint" if any(s.name == spec.mimic[0] and s.kind == "fixed" for s in specs)
+                     else "a joint of several coordinates" if spec.mimic[0] in coordinates_of
+                     else "not a joint of the file")
             assert spec.mimic_element is not None  # a reader that sets mimic sets its element
-            raise document.error(spec.mimic_element, f"of joint {spec.name!r}: {spec.mimic[0]!r} is "
-                                 f"{known if spec.mimic[0] != spec.name else 'the joint itself'}")
-    actuated = [spec for spec in moving if spec.mimic is None]
+            raise document.error(spec.mimic_element, f"of joint {spec.name!r}: " + (
+                f"a {spec.kind} joint cannot mimic (one coordinate only)" if spec.name not in coordinate_of
+                else f"{spec.mimic[0]!r} is {known if spec.mimic[0] != spec.name else 'the joint itself'}"))
+    actuated = [spec for spec in moving if spec.mimic is None and spec.name in coordinate_of]
     torques = {spec.name: sp.Symbol(f"tau_{coordinate_of[spec.name].name}") for spec in actuated}
     g = sp.Symbol("g")
     magnitude = float(np.linalg.norm(gravity))
     direction = np.array(gravity) / magnitude if magnitude > 0 else np.array([0.0, 0.0, -1.0])
     down = [sp.Integer(int(x)) if x in (-1.0, 0.0, 1.0) else sp.Float(x) for x in direction]
-    system = System(list(coordinate_of.values()), parameters=[g, *torques.values()],
+    system = System([q for symbols in coordinates_of.values() for q in symbols], parameters=[g, *torques.values()],
                     gravity=[g * x for x in down], name=name)
     placements = {root: _Placement(sp.zeros(3, 1), sp.eye(3), [], GROUND, np.eye(4), [])}
     parts: dict[str, list[Inertial]] = {}
+    local_frames: dict[str, tuple[str, Frame]] = {}
     for spec in order:
         parent = placements[spec.parent]
         x, y, z, roll, pitch, yaw = spec.origin
         turn = rpy_factors(roll, pitch, yaw)
         factors = _compact(parent.factors + turn)
-        rotation = parent.rotation * RotationSequence(turn).matrix if turn else parent.rotation
+        turned = RotationSequence(turn).matrix if turn else sp.eye(3)
+        rotation = parent.rotation * turned if turn else parent.rotation
         origin = parent.origin + parent.rotation * sp.Matrix([x, y, z])
         points = parent.points + [origin]
         if spec.kind == "fixed":
             in_body = parent.in_body @ transform(spec.origin)
             placements[spec.child] = _Placement(origin, rotation, factors, parent.body, in_body, points)
+            local_frames[spec.child] = (spec.parent, Frame(sp.Matrix([x, y, z]), turned))
             continue
-        q = coordinate_of[spec.name]
-        if spec.kind == "prismatic":
-            origin = origin + rotation * sp.Matrix(spec.axis) * q
-        else:
-            step = _joint_factors(spec, q)
-            factors = factors + step
-            rotation = rotation * RotationSequence(step).matrix
+        local_frames[spec.child] = (spec.parent, Frame(*_step(spec, coordinates_of[spec.name], sp.Matrix([x, y, z]),
+                                                              turned)[::2]))
+        origin, step, rotation = _step(spec, coordinates_of[spec.name], origin, rotation)
+        factors = factors + step
         placements[spec.child] = _Placement(origin, rotation, factors, spec.child, np.eye(4), points)
     for link, placement in placements.items():
         parts.setdefault(placement.body, []).append(moved(inertials[link], placement.in_body))
@@ -341,34 +408,74 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
         system.add_body(RigidBody(spec.child, mass=sp.Float(inertial.mass), inertia=sp.Matrix(inertial.tensor),
                                   position=centre, rotation=_body_rotation(placement), simplify=False))
     for spec in moving:
+        if spec.kind in ("floating", "ball"):
+            system.add_constraint(euler_parameter_constraint(*coordinates_of[spec.name][-4:]),
+                                  name=f"{spec.name}.normalization")
         if spec.mimic is not None:
             joint, multiplier, offset = spec.mimic
             system.add_constraint(coordinate_of[spec.name] - sp.Float(multiplier) * coordinate_of[joint]
                                   - sp.Float(offset), name=f"{spec.name}.mimic")
-    system.add_generalized_force([torques.get(spec.name, 0) for spec in moving], name="joint torques")
+    system.add_generalized_force([torques.get(spec.name, 0) for spec in moving for _ in coordinates_of[spec.name]],
+                                 name="joint torques")
     _add_drawing(system, order, placements, centres)
 
     system.robot = RobotDescription(
         source=document.source, format=file_format, root=root,
         joints=tuple(RobotJoint(spec.name, spec.kind, spec.parent, spec.child, spec.axis, spec.origin,
-                                coordinate_of[spec.name].name if spec.name in coordinate_of else None, spec.limits,
-                                spec.mimic, torques[spec.name].name if spec.name in torques else None)
+                                coordinates_of[spec.name][0].name if spec.name in coordinates_of else None,
+                                spec.limits, spec.mimic, torques[spec.name].name if spec.name in torques else None,
+                                tuple(q.name for q in coordinates_of.get(spec.name, ())))
                      for spec in order),
         body_of_link={name: placement.body for name, placement in placements.items()},
         visuals=tuple(with_mesh_bounds((Visual(link, placements[link].body, shape, size, placements[link].in_body @ pose,
                                                filename) for link, shape, size, pose, filename in visuals),
                                        document.source, package_paths)),
         frames={link: Frame(placement.origin, placement.rotation) for link, placement in placements.items()},
+        local_frames=local_frames,
         values={"g": magnitude, **{symbol.name: 0.0 for symbol in torques.values()}},
-        q_reference={coordinate_of[spec.name].name: spec.mimic[2] if spec.mimic else 0.0 for spec in moving},
+        q_reference={q.name: value for spec in moving for q, value in _reference(spec, coordinates_of[spec.name])},
         skipped=document.skipped_summary(), joint_values=dict(coordinate_of))
     return absolute_system(document, system) if coordinates == "absolute" else system
+
+
+def _reference(spec: TreeJoint, coordinates: list[sp.Symbol]) -> list[tuple[sp.Symbol, float]]:
+    """The coordinates of a joint at the file's reference pose: 0 (a mimic joint its offset), and
+    ``e0 = 1`` for Euler parameters (the joint frame's own orientation)."""
+    values = [spec.mimic[2] if spec.mimic else 0.0] * len(coordinates)
+    if spec.kind in ("floating", "ball"):
+        values[-4] = 1.0
+    return list(zip(coordinates, values))
 
 
 def robot_of(system: System) -> RobotDescription:
     """``system.robot`` of a system :func:`build_system` made (never ``None`` there)."""
     assert system.robot is not None, "not a system read from a robot file"
     return system.robot
+
+
+def relative_frames(system: System, first: str, second: str) -> tuple[Frame, Frame]:
+    """The frames of the links ``first`` and ``second`` in the frame of their nearest common ancestor
+    link: expressions of the joints between them only (a loop's constraints written so stay small;
+    in the world frame they would hold every joint from the root, the floating base's among them)."""
+    local = robot_of(system).local_frames
+
+    def path(link: str) -> list[str]:
+        links = [link]
+        while links[-1] in local:
+            links.append(local[links[-1]][0])
+        return links
+
+    first_path, second_path = path(first), path(second)
+    ancestor = next(link for link in first_path if link in second_path)
+
+    def frame(links: list[str]) -> Frame:
+        origin, rotation = sp.zeros(3, 1), sp.eye(3)
+        for link in reversed(links[:links.index(ancestor)]):
+            step = local[link][1]
+            origin, rotation = origin + rotation * sp.Matrix(step.origin), rotation * sp.Matrix(step.rotation)
+        return Frame(origin, rotation)
+
+    return frame(first_path), frame(second_path)
 
 
 def at_reference(system: System, expression) -> np.ndarray:

@@ -1,7 +1,10 @@
 """URDF reader: :func:`load_urdf` turns a URDF file into a :class:`~kronlag.System` in joint coordinates.
 
-The root link is fixed to the world (the ``ground``); every revolute, continuous and prismatic
-joint moves one coordinate named after it; fixed joints are merged (their child's mass and
+The root link is fixed to the world (the ``ground``) unless ``floating_base=True``; every revolute,
+continuous and prismatic joint moves one coordinate named after it; a ``floating`` joint moves seven
+(``<name>_x _y _z`` and the Euler parameters ``<name>_e0 .. _e3``, with the constraint
+``"<name>.normalization"``), a ``planar`` one three (``<name>_x _y`` in the plane normal to its
+axis, ``<name>_theta`` about it; see :mod:`.tree`); fixed joints are merged (their child's mass and
 inertia are added to the parent's body, which keeps the name of the first link of the group).
 Each body's pose is written with the joint angles, its rotation as a
 :class:`~kronlag.RotationSequence` of the file's ``rpy`` angles and joint axes (so that its
@@ -32,10 +35,10 @@ from .tree import (NO_MASS, Inertial, TreeJoint, build_system, check_inertia, re
 __all__ = ["load_urdf", "JOINT_TYPES"]
 
 #: The URDF joint types the reader turns into coordinates (``fixed`` merges its links).
-JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
+JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 
-#: Joint types URDF defines that this reader does not support yet.
-_LATER_TYPES = ("floating", "planar")
+#: The name of the floating joint ``load_urdf(..., floating_base=True)`` adds (Pinocchio's).
+ROOT_JOINT = "root_joint"
 
 _USED = {"robot": {"link", "joint"}, "link": {"inertial", "visual"}, "inertial": {"origin", "mass", "inertia"},
          "visual": {"origin", "geometry"}, "geometry": {"box", "cylinder", "sphere", "capsule", "mesh"},
@@ -110,12 +113,8 @@ def _visuals(document: XmlDocument, link: Element) -> list[tuple[str, tuple[floa
 def _joint(document: XmlDocument, element: Element) -> TreeJoint:
     name = document.required(element, "name")
     kind = document.required(element, "type")
-    if kind in _LATER_TYPES:
-        raise document.error(element, f"type {kind!r} is not supported by the URDF reader yet (fixed-base trees "
-                                      f"of {', '.join(JOINT_TYPES)} joints)")
     if kind not in JOINT_TYPES:
-        raise document.error(element, f"unknown joint type {kind!r}; URDF joint types are {', '.join(JOINT_TYPES)}, "
-                                      f"{', '.join(_LATER_TYPES)}")
+        raise document.error(element, f"unknown joint type {kind!r}; URDF joint types are {', '.join(JOINT_TYPES)}")
     links = []
     for role in ("parent", "child"):
         tag = element.find(role)
@@ -124,7 +123,7 @@ def _joint(document: XmlDocument, element: Element) -> TreeJoint:
         links.append(document.required(tag, "link"))
     axis_element = element.find("axis")
     axis = (1.0, 0.0, 0.0) if axis_element is None else document.numbers(axis_element, "xyz", 3)
-    if kind != "fixed":
+    if kind not in ("fixed", "floating"):
         norm = float(np.linalg.norm(axis))
         if norm == 0:
             raise document.error(element, "<axis xyz=\"0 0 0\">: a moving joint needs a nonzero axis")
@@ -147,8 +146,8 @@ def _joint(document: XmlDocument, element: Element) -> TreeJoint:
 
 
 
-def load_urdf(path: str | Path, *, coordinates: str = "joint",
-              package_paths: Sequence[str | Path] = ()) -> System:
+def load_urdf(path: str | Path, *, coordinates: str = "joint", package_paths: Sequence[str | Path] = (),
+              floating_base: bool = False) -> System:
     """Read a URDF file into a :class:`~kronlag.System` in joint coordinates (see the module docstring).
 
     Parameters
@@ -159,6 +158,11 @@ def load_urdf(path: str | Path, *, coordinates: str = "joint",
         Joint coordinates (default) or absolute body coordinates (:mod:`.absolute`).
     package_paths : sequence of paths
         Folders searched first for ``package://`` meshes (:mod:`.meshes`).
+    floating_base : bool
+        Join the root link to the world by a ``floating`` joint named ``"root_joint"`` (as
+        Pinocchio's ``JointModelFreeFlyer``; legged robots' files leave it out); its coordinates
+        ``root_joint_x, _y, _z`` are the root link's origin in the world and ``root_joint_e0 ..
+        _e3`` its orientation.
 
     Returns
     -------
@@ -188,8 +192,16 @@ def load_urdf(path: str | Path, *, coordinates: str = "joint",
     if not links:
         raise document.error(robot, "has no <link>")
     specs = [_joint(document, element) for element in robot.findall("joint")]
+    if floating_base:
+        children = {spec.child for spec in specs}
+        roots = [name for name in links if name not in children]
+        world = "world" if "world" not in links else "world_"
+        if len(roots) == 1:  # several roots: build_system names them
+            specs.append(TreeJoint(robot, ROOT_JOINT, "floating", world, roots[0], (0.0,) * 6, (1.0, 0.0, 0.0)))
+            links = {world: robot, **links}
     system = build_system(document, name=robot.get("name") or Path(path).stem, file_format="urdf", links=links,
-                          inertials={name: _inertial(document, element) for name, element in links.items()},
+                          inertials={name: _inertial(document, element) if element.tag == "link" else NO_MASS
+                                     for name, element in links.items()},
                           specs=specs, visuals=[(name, *visual) for name, element in links.items()
                                                 for visual in _visuals(document, element)],
                           coordinates=coordinates, package_paths=package_paths)
