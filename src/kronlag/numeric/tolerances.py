@@ -50,7 +50,7 @@ from ..core.errors import InputError
 
 __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
            "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "ZERO_EIGENVALUE_RTOL", "RESTING_GAP",
-           "CONTACT_GAP", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "SAME_INSTANT", "integrator_tolerances",
+           "CONTACT_GAP", "AT_REST", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "SAME_INSTANT", "integrator_tolerances",
            "zero_eigenvalue_threshold", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes",
            "singular_ratio", "c_macros"]
 
@@ -103,6 +103,11 @@ FRICTION_MAX_ITERATIONS = 50
 #: event is taken at the event, with the state before it (as when the event falls on the sample
 #: instant; an event located to rounding may fall just before it, and a shorter segment is rounding).
 SAME_INSTANT = 1e-10
+
+# -- exact stiction (kronlag.simulation.stiction) --
+#: A joint with the exact friction law whose rate is within AT_REST * atol of zero at the start of a
+#: run is at rest: it sticks or slips as its holding force decides (a rate above that slides).
+AT_REST = 1.0
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float,

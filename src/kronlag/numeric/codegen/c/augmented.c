@@ -115,8 +115,19 @@ static void kronlag_friction_wrench(const double *record, const double *lam, dou
 }
 
 /* The fields after J_rate (m), W (36) and the rows (6): u_force (3), u_couple (3), then RECORD_FIELDS:
- * static, kinetic, viscous, stribeck_velocity, radius, 1/arm, preload, smoothing_velocity. */
+ * static, kinetic, viscous, stribeck_velocity, radius, 1/arm, preload, smoothing_velocity, mode,
+ * hold_row (the modes of kronlag.model.friction: 0 smooth, +-1 sliding that way, 2 sign(v), 3 held). */
 #define KRONLAG_FRICTION_FIELDS(record) ((record) + KRONLAG_M + 48)
+enum { KRONLAG_MODE_SMOOTH = 0, KRONLAG_MODE_SIGN = 2, KRONLAG_MODE_HELD = 3 };
+
+/* The law's sign(v) by the record's mode. */
+static double kronlag_friction_direction(const double *c, double rate)
+{
+    int mode = (int)c[8];
+    if (mode == KRONLAG_MODE_SMOOTH) return tanh(rate / c[7]);
+    if (mode == KRONLAG_MODE_SIGN) return (rate > 0.0) - (rate < 0.0);
+    return mode == KRONLAG_MODE_HELD ? 0.0 : (double)mode;
+}
 
 /* r mu(v): the factor of the normal load in one joint's friction force at the rate v. */
 static double kronlag_friction_coefficient(const double *record, double rate)
@@ -124,7 +135,7 @@ static double kronlag_friction_coefficient(const double *record, double rate)
     const double *c = KRONLAG_FRICTION_FIELDS(record);
     double mu = c[1];
     if (c[3] > 0.0) { double x = rate / c[3]; mu += (c[0] - c[1]) * exp(-x * x); }
-    return c[4] * mu * tanh(rate / c[7]);
+    return c[4] * mu * kronlag_friction_direction(c, rate);
 }
 
 /* The normal load N from the joint's wrench (friction_force in kronlag.numeric.friction). */
@@ -188,7 +199,8 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
         kronlag_friction_wrench(record, multipliers, wrench[j]);
         for (int i = 0; i < nf; ++i) kronlag_friction_wrench(record, dnu + i * (k + 1), response[j][i]);
         factor[j] = kronlag_friction_coefficient(record, rates[j]);
-        viscous[j] = KRONLAG_FRICTION_FIELDS(record)[2] * rates[j];
+        viscous[j] = (int)KRONLAG_FRICTION_FIELDS(record)[8] == KRONLAG_MODE_HELD ? 0.0
+                     : KRONLAG_FRICTION_FIELDS(record)[2] * rates[j];
     }
     /* Newton steps on g(f) = f - r mu N(f) - c v = 0 (N(f) piecewise linear in f: its derivative is the
      * unit direction of the force and couple parts times their responses), from f = 0 */
@@ -239,6 +251,35 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
     }
     return 0;
 }
+
+/* Exact stiction (kronlag.simulation.stiction): what a run watches per joint with friction, each
+ * positive while nothing happens -- d v for a joint sliding in the direction d, r mu_s N - |f| for a
+ * held one (f = nu[hold_row], nu = [lam; mu] from the forward dynamics), 1 otherwise
+ * (stiction_values in kronlag.numeric.friction). */
+static void kronlag_stiction_values(double t, const double *q, const double *qd, const double *p, const double *lam,
+                                    const double *mu, double *out)
+{
+    enum { m = KRONLAG_M, r = KRONLAG_R, k = KRONLAG_K, nf = KRONLAG_FRICTION, size = KRONLAG_FRICTION_RECORD };
+    double records[nf * size + 1], nu[k + 1], wrench[6];
+    kronlag_friction(t, q, qd, p, records);
+    for (int i = 0; i < k; ++i) nu[i] = i < r ? lam[i] : mu[i - r];
+    for (int j = 0; j < nf; ++j) {
+        const double *record = records + j * size, *c = KRONLAG_FRICTION_FIELDS(record);
+        int mode = (int)c[8];
+        out[j] = 1.0;
+        if (mode == 1 || mode == -1) {
+            double rate = 0.0;
+            for (int i = 0; i < m; ++i) rate += record[i] * qd[i];
+            out[j] = mode * rate;
+        } else if (mode == KRONLAG_MODE_HELD) {
+            kronlag_friction_wrench(record, nu, wrench);
+            out[j] = c[4] * c[0] * kronlag_friction_load(record, wrench) - fabs(nu[(int)c[9]]);
+        }
+    }
+}
+#define KRONLAG_STICTION_WATCHED KRONLAG_FRICTION
+#else
+#define KRONLAG_STICTION_WATCHED 0
 #endif
 
 /* The solve at a state: with the joints' friction when the model has any. */
