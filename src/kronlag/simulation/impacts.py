@@ -40,12 +40,12 @@ from ..numeric.friction import friction_joints, has_stiction
 from ..numeric.limit_kernels import LimitKernels, limit_kernels
 from ..numeric.numeric_model import NumericModel
 from ..numeric.projection import project_positions
-from ..numeric.tolerances import CONTACT_GAP, RESTING_GAP, SAME_INSTANT
+from ..numeric.tolerances import AT_REST, CONTACT_GAP, RESTING_GAP, SAME_INSTANT
 from ..symbolic.derivation import derive
 from .controllers import ControlledModel, solve_sampled
 from .problem import MultibodyProblem, Solution, Solver, derived_shapes
 from .stepping import stopped_text
-from .stiction import decide, held_forces, slip, start_modes, stiction_model
+from .stiction import held_forces, start_modes, stiction_model, transition
 from .trajectory import LimitEvent, Result
 from .watch import LimitWatch
 
@@ -302,14 +302,9 @@ class _LimitRun:
     def _stiction(self, t: float, y: np.ndarray, joints: list[int]) -> np.ndarray:
         """The transitions of the joints with friction ``joints`` (their functions fell through zero) at
         ``(t, y)`` (:mod:`.stiction`); the state after, on the new modes' constraints."""
-        held = [j for j in joints if self.modes[j] == MODE_HELD]
-        stopped = [j for j in joints if self.modes[j] != MODE_HELD]
-        if held:
-            self.modes, events = slip(self._variant_of, self.modes, held, t, y, self.friction_names)
-            self.events += events
-        if stopped:
-            self.modes, events = decide(self._variant_of, self.modes, stopped, t, y, self.friction_names)
-            self.events += events
+        self.modes, events = transition(self._variant_of, self.modes, joints, t, y, self.friction_names,
+                                        AT_REST * self.options.atol)
+        self.events += events
         return self._project(t, y)
 
     def _impulse(self, t: float, q: np.ndarray, qd: np.ndarray, sides: list[int], J: np.ndarray,

@@ -37,12 +37,12 @@ import numpy as np
 from ..model.friction import MODE_HELD, MODE_SMOOTH, friction_record, stick_constraint_name
 from ..numeric.friction import friction_joints, friction_records, sticking_limit
 from ..numeric.numeric_model import NumericModel
-from ..numeric.tolerances import AT_REST
+from ..numeric.tolerances import AT_REST, matrix_rank
 from ..symbolic.derivation import derive
 from .controllers import ControlledModel
 from .trajectory import StictionEvent
 
-__all__ = ["stiction_model", "start_modes", "decide", "slip", "held_forces"]
+__all__ = ["stiction_model", "start_modes", "transition", "held_forces"]
 
 _STICTION_EQUATIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _STICTION_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -97,44 +97,98 @@ def _holding(variant: NumericModel, t: float, y: np.ndarray) -> list[tuple[float
             for record in records]
 
 
-def decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[int, ...], stopped: list[int],
-           t: float, y: np.ndarray, names: list[str]) -> tuple[tuple[int, ...], list[StictionEvent]]:
-    """The modes after the joints ``stopped`` (indices) reached zero rate at ``(t, y)`` (see the module
-    docstring), and the events; ``variant_of(modes)`` is a segment's model in ``modes``."""
-    trial = tuple(MODE_HELD if j in stopped else mode for j, mode in enumerate(modes))
-    holding = _holding(variant_of(trial), t, y)
-    m = len(y) // 2
-    modes = list(modes)
-    events = []
-    for j in stopped:
-        force, threshold = holding[j]
-        before = modes[j]
-        if abs(force) <= threshold:
-            modes[j] = MODE_HELD
-            events.append(StictionEvent(t=t, joint=names[j], kind="stick", q=y[:m].copy(), force=force,
-                                        threshold=threshold))
-        else:
-            modes[j] = 1 if force > 0 else -1
-            if before != modes[j]:
-                events.append(StictionEvent(t=t, joint=names[j], kind="slip" if before == MODE_HELD else "reverse",
-                                            q=y[:m].copy(), force=force, threshold=threshold))
-    return tuple(modes), events
+def _passing(model: NumericModel, stopped: list[int], t: float, y: np.ndarray) -> list[int]:
+    """The joints of ``stopped`` whose rate vanishes at ``q`` for every motion the constraints allow (its
+    row ``J_rate`` is a combination of ``[Phi_q; A]``: a kinematic dead point of that joint, e.g. a pin of
+    a four-bar whose relative rotation reverses while the linkage moves): they cannot be held (the row
+    ``v = 0`` would also have to hold just after) and their rate passes through zero."""
+    m = model.m
+    q = y[:m]
+    rows = np.vstack([model.Phi_q(q, t).reshape(-1, m), model.A(q, t).reshape(-1, m)])
+    rank = matrix_rank(rows, model.rank_rtol) if len(rows) else 0
+    records = friction_records(model, t, q, y[m:])
+    return [j for j in stopped if matrix_rank(np.vstack([rows, records[j]["J"][None, :]]), model.rank_rtol) == rank]
 
 
-def slip(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[int, ...], slipping: list[int],
-         t: float, y: np.ndarray, names: list[str]) -> tuple[tuple[int, ...], list[StictionEvent]]:
-    """The modes after the held joints ``slipping`` reached ``|f| = r mu_s N`` at ``(t, y)``: each slides in
-    the direction of its holding force (event ``slip``)."""
-    holding = _holding(variant_of(modes), t, y)
+def _rate_changes(model: NumericModel, t: float, y: np.ndarray) -> np.ndarray:
+    """``dv/dt`` of every joint with friction at ``(t, y)`` in the segment model ``model``: the rate one short
+    step along the motion (``v`` is zero where this is asked)."""
+    m = model.m
+    q, qd = y[:m], y[m:]
+    qdd = model.forward_dynamics(q, qd, t).qdd
+    step = 1e-7 * max(1.0, abs(t))
+    ahead = friction_records(model, t + step, q + step * qd, qd + step * qdd)
+    now = friction_records(model, t, q, qd)
+    return np.array([(float(a["J"] @ (qd + step * qdd)) - float(b["J"] @ qd)) / step for a, b in zip(ahead, now)])
+
+
+def transition(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[int, ...], triggered: list[int],
+               t: float, y: np.ndarray, names: list[str], rest: float) -> tuple[tuple[int, ...], list[StictionEvent]]:
+    """The modes after the joints ``triggered`` (indices) had their watched functions fall through zero at
+    ``(t, y)`` (the module docstring), and the events; ``variant_of(modes)`` is a segment's model in
+    ``modes``, ``rest`` the rate below which a joint is at rest."""
     m = len(y) // 2
-    modes = list(modes)
+    old = modes
+    current = variant_of(modes)
+    nu = _multipliers(current, t, y)
+    records = friction_records(current, t, y[:m], y[m:])
+    rates = [float(record["J"] @ y[m:]) for record in records]
+    new = list(modes)
+    found: dict[int, tuple[float, float]] = {}  # (holding force, r mu_s N) by joint, for the events
+    for j in triggered:  # held joints whose holding force reached r mu_s N: slide along it
+        if modes[j] == MODE_HELD:
+            force = float(nu[int(records[j]["hold_row"])])
+            new[j] = 1 if force > 0 else -1
+            found[j] = (force, sticking_limit(records[j], nu))
+    stopped = [j for j, mode in enumerate(modes) if mode in (1, -1) and (j in triggered or abs(rates[j]) <= rest)]
+    passing = _passing(current, stopped, t, y)
+    for j in passing:
+        new[j] = -modes[j]
+    stopped = [j for j in stopped if j not in passing]
+    if stopped:  # held together: each sticks if its holding force is within r mu_s N
+        trial = tuple(MODE_HELD if j in stopped else mode for j, mode in enumerate(new))
+        holding = _holding(variant_of(trial), t, y)
+        for j in stopped:
+            force, threshold = found[j] = holding[j]
+            new[j] = MODE_HELD if abs(force) <= threshold else (1 if force > 0 else -1)
+    new = _consistent(variant_of, new, t, y, rest)
     events = []
-    for j in slipping:
-        force, threshold = holding[j]
-        modes[j] = 1 if force > 0 else -1
-        events.append(StictionEvent(t=t, joint=names[j], kind="slip", q=y[:m].copy(), force=force,
+    for j, (before, after) in enumerate(zip(old, new)):
+        if before == after:
+            continue
+        kind = "stick" if after == MODE_HELD else "slip" if before == MODE_HELD else "reverse"
+        force, threshold = found.get(j, (0.0, 0.0))
+        events.append(StictionEvent(t=t, joint=names[j], kind=kind, q=y[:m].copy(), force=force,
                                     threshold=threshold))
-    return tuple(modes), events
+    return tuple(new), events
+
+
+def _multipliers(model: NumericModel, t: float, y: np.ndarray) -> np.ndarray:
+    solution = model.forward_dynamics(y[:model.m], y[model.m:], t)
+    return np.concatenate([solution.lam, solution.mu])
+
+
+def _consistent(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: list[int], t: float, y: np.ndarray,
+                rest: float) -> list[int]:
+    """``modes`` with every sliding joint at rest made to slide the way its rate then goes: one whose rate
+    would grow against its direction slides the other way, and one that would decelerate either way
+    sticks.  (Holding forces of redundant holds -- a linkage stopping with several joints -- are the
+    minimum-norm ones and may point a joint the wrong way: this corrects the direction.)"""
+    m = len(y) // 2
+    modes = list(modes)
+    flipped: set[int] = set()
+    for _ in range(2 * len(modes) + 1):
+        model = variant_of(tuple(modes))
+        records = friction_records(model, t, y[:m], y[m:])
+        changes = _rate_changes(model, t, y)
+        wrong = [j for j, (mode, record) in enumerate(zip(modes, records))
+                 if mode in (1, -1) and abs(float(record["J"] @ y[m:])) <= rest and mode * changes[j] < 0]
+        if not wrong:
+            return modes
+        j = wrong[0]
+        modes[j] = MODE_HELD if j in flipped else -modes[j]
+        flipped.add(j)
+    return modes
 
 
 def start_modes(model: NumericModel, variant_of: Callable[[tuple[int, ...]], NumericModel], t: float,
@@ -144,16 +198,21 @@ def start_modes(model: NumericModel, variant_of: Callable[[tuple[int, ...]], Num
     joints = friction_joints(system)
     m = model.m
     records = friction_records(model, t, y[:m], y[m:])
-    modes, resting = [], []
-    for j, (joint, record) in enumerate(zip(joints, records)):
+    modes = []
+    for joint, record in zip(joints, records):
         rate = float(record["J"] @ y[m:])
-        if joint.friction.law == "smooth":
-            modes.append(MODE_SMOOTH)
-        elif abs(rate) <= AT_REST * atol:
-            modes.append(MODE_HELD)
-            resting.append(j)
-        else:
-            modes.append(1 if rate > 0 else -1)
+        modes.append(MODE_SMOOTH if joint.friction.law == "smooth" else 1 if rate >= 0 else -1)
+    names = [joint.name for joint in joints]
+    rest = AT_REST * atol
+    resting = [j for j, record in enumerate(records) if modes[j] != MODE_SMOOTH and abs(float(record["J"] @ y[m:])) <= rest]
     if not resting:
         return tuple(modes), []
-    return decide(variant_of, tuple(modes), resting, t, y, [joint.name for joint in joints])
+    new, _ = transition(variant_of, tuple(modes), resting, t, y, names, rest)
+    # at rest at the start: a joint that slides slips, one that is held sticks (whatever direction it was given)
+    holding = _holding(variant_of(tuple(MODE_HELD if j in resting else mode for j, mode in enumerate(modes))), t, y)
+    events = []
+    for j in resting:
+        force, threshold = holding[j]
+        events.append(StictionEvent(t=t, joint=names[j], kind="stick" if new[j] == MODE_HELD else "slip",
+                                    q=y[:m].copy(), force=force, threshold=threshold))
+    return new, events
