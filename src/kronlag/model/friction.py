@@ -21,7 +21,10 @@ The coefficient is the smooth law (``law="smooth"``)::
 
     mu(v) = (mu_k + (mu_s - mu_k) exp(-(v / v_s)^2)) tanh(v / v_eps)
 
-(``v_s``: ``stribeck_velocity``; without it ``mu_s = mu_k``; ``v_eps``: ``smoothing_velocity``).
+(``v_s``: ``stribeck_velocity``; without it ``mu_s = mu_k``; ``v_eps``: ``smoothing_velocity``), or
+the exact law (``law="exact"``): ``sign(v)`` in place of ``tanh``, no Stribeck term without ``v_s``,
+and a joint whose rate reaches zero sticks until its holding force exceeds ``r mu_s N``
+(:mod:`kronlag.simulation.stiction`; the record's ``mode`` field says which way a run's segment takes).
 The generalized force is ``Q_f = -J_rate^T f`` with ``v = J_rate(q) qd``; since ``N`` depends on
 the multipliers, forward dynamics solves for ``(qdd, lambda)`` and the friction together
 (:mod:`kronlag.numeric.friction`).
