@@ -87,15 +87,20 @@ def _work(power_of, model, t: np.ndarray, q, qd, qdd) -> np.ndarray:
         return power_of(model, t[k] + e, q[k] + e * qd[k], qd[k] + e * qdd[k])
 
     # a segment's end (or start) is a sample repeated at one time (an event: an impact, a joint that
-    # sticks, where the power has a kink), as are the motion's ends: the rate from that segment's side
-    # only (second order)
+    # sticks or reverses, where the power jumps or has a kink), as are the motion's ends: there the
+    # power and its rate come from that segment's side only, extrapolated from two points along the
+    # motion (the sample itself may lie on the event's other side by the root's tolerance)
     ends = np.zeros(len(t), dtype=int)
     repeated = np.flatnonzero(np.diff(t) == 0)
     ends[repeated], ends[repeated + 1] = -1, 1
     ends[0], ends[-1] = 1, -1
-    rate = np.array([(along(k, step) - along(k, -step)) / (2 * step) if side == 0 else
-                     side * (-3 * power[k] + 4 * along(k, side * step) - along(k, 2 * side * step)) / (2 * step)
-                     for k, side in enumerate(ends)])
+    rate = np.empty(len(t))
+    for k, side in enumerate(ends):
+        if side == 0:
+            rate[k] = (along(k, step) - along(k, -step)) / (2 * step)
+            continue
+        near, far = along(k, side * step), along(k, 2 * side * step)
+        power[k], rate[k] = 2 * near - far, (far - near) / (side * step)
     return _integrated(t, power, rate)
 
 
