@@ -3,6 +3,8 @@ API and model files, on the default method with friction (compiled CVODE) and th
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import sympy as sp
@@ -253,7 +255,7 @@ def test_four_bar_with_exact_friction_in_every_pin_rubs_against_every_rate(tmp_p
     power's jumps at the events are integrated from each segment's side)."""
     from kronlag.app.workflows import initial_state, numeric_model
 
-    text = open("examples/four_bar_friction.toml").read()
+    text = Path("examples/four_bar_friction.toml").read_text()
     text = "\n".join(line.split(", smoothing_velocity")[0] + ', law = "exact"}' if line.startswith("friction =")
                      else line for line in text.splitlines())
     path = tmp_path / "four_bar_exact.toml"

@@ -49,9 +49,21 @@ if TYPE_CHECKING:
     from .joints import Joint
     from .system import System
 
-__all__ = ["Friction", "FRICTION_FIELDS", "check_friction", "friction_uses", "FRICTION_KINDS", "FRICTION_LAWS",
-           "RECORD_FIELDS", "record_size", "friction_record", "MODE_SMOOTH", "MODE_SIGN", "MODE_HELD",
-           "stick_constraint_name"]
+__all__ = [
+    "FRICTION_FIELDS",
+    "FRICTION_KINDS",
+    "FRICTION_LAWS",
+    "MODE_HELD",
+    "MODE_SIGN",
+    "MODE_SMOOTH",
+    "RECORD_FIELDS",
+    "Friction",
+    "check_friction",
+    "friction_record",
+    "friction_uses",
+    "record_size",
+    "stick_constraint_name",
+]
 
 #: The joint kinds that take friction, by dimension.
 FRICTION_KINDS = {2: ("revolute", "prismatic"), 3: ("revolute", "prismatic")}

@@ -23,11 +23,27 @@ from collections.abc import Callable
 import numpy as np
 
 from ..core.errors import NumericalError
-from ..model.friction import MODE_HELD, MODE_SIGN, MODE_SMOOTH, RECORD_FIELDS, friction_record, record_size
+from ..model.friction import (
+    MODE_HELD,
+    MODE_SIGN,
+    MODE_SMOOTH,
+    RECORD_FIELDS,
+    friction_record,
+    record_size,
+)
 from .tolerances import FRICTION_MAX_ITERATIONS, FRICTION_RTOL
 
-__all__ = ["friction_joints", "friction_kernel_matrices", "friction_force", "solve_with_friction",
-           "friction_columns", "friction_records", "stiction_values", "sticking_limit", "has_stiction"]
+__all__ = [
+    "friction_columns",
+    "friction_force",
+    "friction_joints",
+    "friction_kernel_matrices",
+    "friction_records",
+    "has_stiction",
+    "solve_with_friction",
+    "sticking_limit",
+    "stiction_values",
+]
 
 
 def friction_joints(system) -> list:

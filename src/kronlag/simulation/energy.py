@@ -20,7 +20,7 @@ import numpy as np
 
 from ..numeric.friction import friction_columns, friction_joints
 
-__all__ = ["nonconservative_work", "friction_work"]
+__all__ = ["friction_work", "nonconservative_work"]
 
 
 def _friction_power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:

@@ -35,7 +35,6 @@ from dataclasses import replace
 import numpy as np
 
 from ..core.errors import InputError
-from ..model.friction import MODE_HELD
 from ..numeric.friction import friction_joints, has_stiction
 from ..numeric.limit_kernels import LimitKernels, limit_kernels
 from ..numeric.numeric_model import NumericModel
@@ -49,7 +48,7 @@ from .stiction import held_forces, start_modes, stiction_model, transition
 from .trajectory import LimitEvent, Result
 from .watch import LimitWatch
 
-__all__ = ["has_limits", "has_events", "solve_with_limits", "contact_model"]
+__all__ = ["contact_model", "has_events", "has_limits", "solve_with_limits"]
 
 
 #: Most events at one instant (simultaneous impacts, a contact made and released) before the run

@@ -34,7 +34,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..model.friction import MODE_HELD, MODE_SMOOTH, friction_record, stick_constraint_name
+from ..model.friction import (
+    MODE_HELD,
+    MODE_SMOOTH,
+    friction_record,
+    stick_constraint_name,
+)
 from ..numeric.friction import friction_joints, friction_records, sticking_limit
 from ..numeric.numeric_model import NumericModel
 from ..numeric.tolerances import AT_REST, matrix_rank
@@ -42,7 +47,7 @@ from ..symbolic.derivation import derive
 from .controllers import ControlledModel
 from .trajectory import StictionEvent
 
-__all__ = ["stiction_model", "start_modes", "transition", "held_forces"]
+__all__ = ["held_forces", "start_modes", "stiction_model", "transition"]
 
 _STICTION_EQUATIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _STICTION_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -64,7 +69,8 @@ def stiction_model(model: NumericModel, modes: tuple[int, ...]) -> NumericModel:
             variant = copy.copy(system)
             variant.nonholonomic_constraints = list(system.nonholonomic_constraints)
             joints = friction_joints(system)
-            variant.stiction_modes = {joint.name: mode for joint, mode in zip(joints, modes)}
+            # read by friction_record (the record's mode field); not an attribute of every System
+            variant.__dict__["stiction_modes"] = {joint.name: mode for joint, mode in zip(joints, modes)}
             for joint, mode in zip(joints, modes):
                 if mode == MODE_HELD:
                     rate = friction_record(system, joint)[:len(system.coordinates), 0]
