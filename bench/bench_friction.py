@@ -5,7 +5,7 @@ examples/slider_crank_friction.toml.
 
 Run by hand (not a pytest test)::
 
-    python3 bench/bench_friction.py [--repeat 5] [--rtol 1e-8]
+    python3 bench/bench_friction.py [--repeat 5] [--rtol 1e-8] [--law exact|smooth]
 
 The frictionless model is the file with its ``friction = {...}`` lines removed (the same bodies,
 joints and start).  Both run ``kronlag.simulate`` with the compiled method (CVODE) over the file's
@@ -29,10 +29,13 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 FILES = {"four-bar": EXAMPLES / "four_bar_friction.toml", "slider-crank": EXAMPLES / "slider_crank_friction.toml"}
 
 
-def _model(path: Path, *, friction: bool, directory: Path):
+def _model(path: Path, *, friction: bool, directory: Path, law: str = "smooth"):
     text = path.read_text()
     if not friction:
         text = "\n".join(line for line in text.splitlines() if not line.startswith("friction ="))
+    elif law == "exact":  # the same coefficients, exact stiction (no smoothing velocity)
+        text = "\n".join(line.split(", smoothing_velocity")[0] + ', law = "exact"}' if line.startswith("friction =")
+                         else line for line in text.splitlines())
     copy = directory / f"{path.stem}_{friction}.toml"
     copy.write_text(text)
     model_file = kronlag.load_model(copy, apply_drives=False)
@@ -46,10 +49,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--rtol", type=float, default=1e-8)
+    parser.add_argument("--law", choices=("smooth", "exact"), default="exact")
     arguments = parser.parse_args()
     with tempfile.TemporaryDirectory() as directory:
         for name, path in FILES.items():
-            runs = {friction: _model(path, friction=friction, directory=Path(directory)) for friction in (True, False)}
+            runs = {friction: _model(path, friction=friction, directory=Path(directory), law=arguments.law)
+                    for friction in (True, False)}
             times = {True: float("inf"), False: float("inf")}
             evaluations = {}
             for _ in range(arguments.repeat):
@@ -62,7 +67,7 @@ def main() -> None:
                     evaluations[friction] = trajectory.nfev
             ratio = times[True] / times[False]
             per_call = (times[True] / max(evaluations[True], 1)) / (times[False] / max(evaluations[False], 1))
-            print(f"{name}: friction {times[True] * 1e3:.1f} ms ({evaluations[True]} evaluations), "
+            print(f"{name} ({arguments.law} law): friction {times[True] * 1e3:.1f} ms ({evaluations[True]} evaluations), "
                   f"frictionless {times[False] * 1e3:.1f} ms ({evaluations[False]} evaluations): "
                   f"ratio {ratio:.2f} (target <= 1.5), per evaluation {per_call:.2f}")
 

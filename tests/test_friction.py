@@ -268,7 +268,7 @@ def test_friction_is_written_to_model_files_and_read_back(tmp_path):
      "joints[0]: joint 'pivot': friction in a revolute joint needs radius"),
     (('kinetic = "mu"', 'kinetic = "mu", grip = 1'), "joints[0].friction.grip: unknown field"),
     (('kinetic = "mu"', 'kinetic = "-0.1"'), "joints[0].friction: friction kinetic: must be a real number >= 0"),
-    (('kinetic = "mu"', 'kinetic = "mu", law = "exact"'), "joints[0].friction: friction: law must be one of"),
+    (('kinetic = "mu"', 'kinetic = "mu", law = "coulomb"'), "joints[0].friction: friction: law must be one of"),
     (('r = {value = 0.01, unit = "m"}', 'r = {value = 0.01, unit = "s"}'), "r"),
 ])
 def test_model_file_friction_errors_are_located(tmp_path, change, message):

@@ -53,7 +53,7 @@ names: tuple[str, ...] = trajectory.coordinate_names
 q: np.ndarray = trajectory.q
 energy: np.ndarray = trajectory.total_energy
 columns: dict[str, np.ndarray] = trajectory.columns()
-events: tuple[kronlag.SingularPassage | kronlag.LimitEvent, ...] = trajectory.events
+events: tuple[kronlag.SingularPassage | kronlag.LimitEvent | kronlag.StictionEvent, ...] = trajectory.events
 result: kronlag.Result = trajectory.result
 trajectory.to_csv("run.csv")
 swept: kronlag.SweepResult = kronlag.sweep(model, parameters={"tau": [0.0, 1.0]}, initial_states=(q0, qd0),

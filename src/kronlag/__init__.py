@@ -53,7 +53,7 @@ from .numeric.results import ForwardDynamicsBatch, ForwardDynamicsResult, Invers
 from .simulation.controllers import Sampled  # noqa: E402
 from .simulation.problem import Solver  # noqa: E402
 from .simulation.simulate import simulate  # noqa: E402
-from .simulation.trajectory import LimitEvent, Result, SingularPassage, Trajectory  # noqa: E402
+from .simulation.trajectory import LimitEvent, Result, SingularPassage, StictionEvent, Trajectory  # noqa: E402
 from .studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis  # noqa: E402
 from .studies.equilibrium import Equilibrium  # noqa: E402
 from .studies.linearization import LinearModel, linearize  # noqa: E402
@@ -87,6 +87,7 @@ __all__ = [
     "load_sdf",
     "System",
     "LimitEvent",
+    "StictionEvent",
     "PlanarBody",
     "RigidBody",
     "RotationSequence",

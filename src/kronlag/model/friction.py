@@ -21,7 +21,10 @@ The coefficient is the smooth law (``law="smooth"``)::
 
     mu(v) = (mu_k + (mu_s - mu_k) exp(-(v / v_s)^2)) tanh(v / v_eps)
 
-(``v_s``: ``stribeck_velocity``; without it ``mu_s = mu_k``; ``v_eps``: ``smoothing_velocity``).
+(``v_s``: ``stribeck_velocity``; without it ``mu_s = mu_k``; ``v_eps``: ``smoothing_velocity``), or
+the exact law (``law="exact"``): ``sign(v)`` in place of ``tanh``, no Stribeck term without ``v_s``,
+and a joint whose rate reaches zero sticks until its holding force exceeds ``r mu_s N``
+(:mod:`kronlag.simulation.stiction`; the record's ``mode`` field says which way a run's segment takes).
 The generalized force is ``Q_f = -J_rate^T f`` with ``v = J_rate(q) qd``; since ``N`` depends on
 the multipliers, forward dynamics solves for ``(qdd, lambda)`` and the friction together
 (:mod:`kronlag.numeric.friction`).
@@ -46,17 +49,41 @@ if TYPE_CHECKING:
     from .joints import Joint
     from .system import System
 
-__all__ = ["Friction", "FRICTION_FIELDS", "check_friction", "friction_uses", "FRICTION_KINDS", "FRICTION_LAWS",
-           "RECORD_FIELDS", "record_size", "friction_record"]
+__all__ = [
+    "FRICTION_FIELDS",
+    "FRICTION_KINDS",
+    "FRICTION_LAWS",
+    "MODE_HELD",
+    "MODE_SIGN",
+    "MODE_SMOOTH",
+    "RECORD_FIELDS",
+    "Friction",
+    "check_friction",
+    "friction_record",
+    "friction_uses",
+    "record_size",
+    "stick_constraint_name",
+]
 
 #: The joint kinds that take friction, by dimension.
 FRICTION_KINDS = {2: ("revolute", "prismatic"), 3: ("revolute", "prismatic")}
 #: The friction laws available.
-FRICTION_LAWS = ("smooth",)
+FRICTION_LAWS = ("smooth", "exact")
 #: The scalar fields of a joint's record after ``J_rate`` (m), ``W`` (6 x 6), the rows (6), ``u_force`` (3)
 #: and ``u_couple`` (3): the numeric form read by both backends (:mod:`kronlag.numeric.friction`).
 RECORD_FIELDS = ("static", "kinetic", "viscous", "stribeck_velocity", "radius", "inverse_arm", "preload",
-                 "smoothing_velocity")
+                 "smoothing_velocity", "mode", "hold_row")
+
+# The record's ``mode``: how the law's direction is taken.  The exact law's segments
+# (:mod:`kronlag.simulation.stiction`) fix it per joint: +1 or -1 while the joint slides that way (the
+# rate may pass through zero inside a step, where the event is located), MODE_HELD while it sticks (the
+# law gives no force: the holding row's multiplier, ``hold_row`` of ``[lambda; mu]``, is the friction).
+#: ``tanh(v / v_eps)``: the smooth law.
+MODE_SMOOTH = 0
+#: ``sign(v)``: the exact law outside a run's segments (the trajectory's columns, a single evaluation).
+MODE_SIGN = 2
+#: Stuck: held by a constraint ``v = 0``.
+MODE_HELD = 3
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,8 +106,10 @@ class Friction:
         The arm (m) a couple is divided by to give a normal force; absent: couples do not count.
     preload : optional
         ``F0`` (N), default 0.
-    law : {"smooth"}
-        The smooth law; exact stiction (``"exact"``) is not available yet.
+    law : {"smooth", "exact"}
+        ``"smooth"``: ``tanh(v / v_eps)`` in place of ``sign(v)``; ``"exact"``: ``sign(v)`` while the
+        joint slides, and a joint whose rate reaches zero sticks, held by a constraint until the
+        holding force exceeds ``mu_s N`` (:mod:`kronlag.simulation.stiction`).
     smoothing_velocity : optional
         ``v_eps`` of ``tanh(v / v_eps)`` (m/s or rad/s), default 1e-3.
     """
@@ -97,10 +126,8 @@ class Friction:
 
     def __post_init__(self):
         if self.law not in FRICTION_LAWS:
-            hint = (" (exact stiction, held as a constraint, is not available yet: use law='smooth')"
-                    if self.law == "exact" else "")
             raise ModelError(f"friction: law must be one of {', '.join(map(repr, FRICTION_LAWS))}, "
-                             f"got {self.law!r}{hint}")
+                             f"got {self.law!r}")
         for field in fields(self):
             if field.name == "law":
                 continue
@@ -122,7 +149,7 @@ class Friction:
             object.__setattr__(self, field.name, expression)
         if self.static is None:
             object.__setattr__(self, "static", self.kinetic)
-        if sp.simplify(self.static - self.kinetic) != 0 and self.stribeck_velocity is None:
+        if self.law == "smooth" and sp.simplify(self.static - self.kinetic) != 0 and self.stribeck_velocity is None:
             raise ModelError("friction: static != kinetic needs a stribeck_velocity (the speed over which "
                              "mu falls from static to kinetic)")
         excess = sp.simplify(self.static - self.kinetic)
@@ -175,6 +202,11 @@ def friction_uses(joint: Joint) -> list[tuple[str, sp.Expr, dict[str, int]]]:
                   "stribeck_velocity": rate, "smoothing_velocity": rate}
     friction = joint.friction.expressions() if joint.friction is not None else {}
     return [(field, value, dimensions[field]) for field, value in friction.items()]
+
+
+def stick_constraint_name(joint: str) -> str:
+    """The name of the constraint ``v = 0`` that holds a sticking joint (a variant's nonholonomic row)."""
+    return f"stick {joint}"
 
 
 def record_size(m: int) -> int:
@@ -236,7 +268,11 @@ def friction_record(system: System, joint: Joint) -> sp.Matrix:
     index = {constraint.name: j for j, constraint in enumerate(system.constraints)}
     rows = [index[name] for name in joint.constraint_names] + [-1] * (6 - k)
     values = friction.expressions()
+    mode = MODE_SMOOTH if friction.law == "smooth" else getattr(system, "stiction_modes", {}).get(joint.name, MODE_SIGN)
+    held = [j for j, constraint in enumerate(system.nonholonomic_constraints)
+            if constraint.name == stick_constraint_name(joint.name)]
+    hold_row = len(system.constraints) + held[0] if held else -1
     scalars = [values["static"], values["kinetic"], values["viscous"], values.get("stribeck_velocity", 0),
                values.get("radius", 1), 1 / values["arm"] if "arm" in values else 0, values["preload"],
-               values["smoothing_velocity"]]
+               values["smoothing_velocity"], mode, hold_row]
     return sp.Matrix([*rate, *wrench, *rows, *u_force, *u_couple, *scalars])

@@ -23,16 +23,37 @@ from collections.abc import Callable
 import numpy as np
 
 from ..core.errors import NumericalError
-from ..model.friction import RECORD_FIELDS, friction_record, record_size
+from ..model.friction import (
+    MODE_HELD,
+    MODE_SIGN,
+    MODE_SMOOTH,
+    RECORD_FIELDS,
+    friction_record,
+    record_size,
+)
 from .tolerances import FRICTION_MAX_ITERATIONS, FRICTION_RTOL
 
-__all__ = ["friction_joints", "friction_kernel_matrices", "friction_force", "solve_with_friction",
-           "friction_columns"]
+__all__ = [
+    "friction_columns",
+    "friction_force",
+    "friction_joints",
+    "friction_kernel_matrices",
+    "friction_records",
+    "has_stiction",
+    "solve_with_friction",
+    "sticking_limit",
+    "stiction_values",
+]
 
 
 def friction_joints(system) -> list:
     """The joints of ``system`` with friction, in the order added."""
     return [joint for joint in system.joints if joint.friction is not None]
+
+
+def has_stiction(system) -> bool:
+    """Whether a joint of ``system`` has the exact law (``Friction(law="exact")``)."""
+    return any(joint.friction.law == "exact" for joint in friction_joints(system))
 
 
 def friction_kernel_matrices(system) -> dict:
@@ -66,19 +87,34 @@ def _load(record: dict, wrench: np.ndarray) -> float:
                  * np.linalg.norm(_perpendicular(wrench[3:], record["u_couple"])) + record["preload"])
 
 
+def _direction(record: dict, rate: float) -> float:
+    """The law's ``sign(v)`` by the record's mode (:data:`~kronlag.model.friction.MODE_SMOOTH` etc.)."""
+    mode = record["mode"]
+    if mode == MODE_SMOOTH:
+        return math.tanh(rate / record["smoothing_velocity"])
+    if mode == MODE_SIGN:
+        return float(np.sign(rate))
+    return 0.0 if mode == MODE_HELD else mode
+
+
 def _factor(record: dict, rate: float) -> float:
     """``r mu(v)``: the factor of the normal load at the rate ``v``."""
     coefficient = record["kinetic"]
     if record["stribeck_velocity"] > 0:
         coefficient += (record["static"] - record["kinetic"]) * math.exp(-(rate / record["stribeck_velocity"]) ** 2)
-    return record["radius"] * coefficient * math.tanh(rate / record["smoothing_velocity"])
+    return record["radius"] * coefficient * _direction(record, rate)
+
+
+def _viscous(record: dict, rate: float) -> float:
+    """``c v``, none while held (the holding row gives the whole force)."""
+    return 0.0 if record["mode"] == MODE_HELD else record["viscous"] * rate
 
 
 def friction_force(record: dict, lam: np.ndarray, rate: float) -> tuple[float, float]:
     """``(f, N)``: the friction force (torque) of one joint at multipliers ``lam`` and rate ``rate``, and
     its normal load (see :mod:`kronlag.model.friction`)."""
     load = _load(record, _wrench(record, lam))
-    return _factor(record, rate) * load + record["viscous"] * rate, load
+    return _factor(record, rate) * load + _viscous(record, rate), load
 
 
 def _load_slope(record: dict, wrench: np.ndarray) -> np.ndarray:
@@ -122,7 +158,7 @@ def solve_with_friction(solve: Callable[[np.ndarray], tuple], flat: np.ndarray, 
         residual, jacobian = np.zeros(len(joints)), np.eye(len(joints))
         for j, joint in enumerate(joints):
             wrench = wrenches[j] + sum(f * unit for f, unit in zip(forces, unit_wrenches[j]))
-            residual[j] = forces[j] - factors[j] * _load(joint, wrench) - joint["viscous"] * rates[j]
+            residual[j] = forces[j] - factors[j] * _load(joint, wrench) - _viscous(joint, rates[j])
             slope = _load_slope(joint, wrench)
             jacobian[j] -= factors[j] * np.array([slope @ unit for unit in unit_wrenches[j]])
         try:
@@ -138,10 +174,37 @@ def solve_with_friction(solve: Callable[[np.ndarray], tuple], flat: np.ndarray, 
                          "steps (a wedged joint: the friction grows with the load faster than the load allows)")
 
 
-def friction_columns(model, t, q, qd, lam) -> dict[str, np.ndarray]:
+def friction_records(model, t: float, q: np.ndarray, qd: np.ndarray) -> list[dict]:
+    """The records of ``model``'s joints with friction at a state, split into their fields."""
+    flat = model.evaluate_expressions("friction", lambda: friction_kernel_matrices(model.equations.system), q, qd,
+                                      t=float(t))["friction"][:, 0]
+    return [_split(record, model.m) for record in flat.reshape(-1, record_size(model.m))]
+
+
+def sticking_limit(record: dict, nu: np.ndarray) -> float:
+    """``r mu_s N``: the largest holding force of a joint at the multipliers ``nu`` (``[lambda; mu]``)."""
+    return float(record["radius"] * record["static"] * _load(record, _wrench(record, nu)))
+
+
+def stiction_values(records: list[dict], qd: np.ndarray, nu: np.ndarray) -> np.ndarray:
+    """What a run watches per joint with friction (:mod:`kronlag.simulation.stiction`), each positive while
+    nothing happens: ``d v`` for a joint sliding in the direction ``d`` (its mode +-1), ``r mu_s N - |f|``
+    for a held one (``f`` its holding row's multiplier in ``nu = [lambda; mu]``), 1 otherwise."""
+    values = np.ones(len(records))
+    for j, record in enumerate(records):
+        mode = record["mode"]
+        if mode in (1.0, -1.0):
+            values[j] = mode * float(record["J"] @ qd)
+        elif mode == MODE_HELD:
+            values[j] = sticking_limit(record, nu) - abs(float(nu[int(record["hold_row"])]))
+    return values
+
+
+def friction_columns(model, t, q, qd, lam, held: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Per joint with friction, along a motion: ``<joint>.friction`` (its friction force or torque, N or
     N*m, acting against its rate), ``<joint>.normal_load`` (N) and ``<joint>.rate`` (rad/s or m/s),
-    each (N,); and ``friction_power`` ``Q_f . qd = -sum f v`` (W, <= 0 without preload)."""
+    each (N,); and ``friction_power`` ``Q_f . qd = -sum f v`` (W, <= 0 without preload).  ``held``
+    (N, joints with friction): the holding force of a sticking joint (exact law), NaN where it slides."""
     system = model.equations.system
     joints = friction_joints(system)
     t, q, qd, lam = np.atleast_1d(t), np.atleast_2d(q), np.atleast_2d(qd), np.atleast_2d(lam)
@@ -155,6 +218,9 @@ def friction_columns(model, t, q, qd, lam) -> dict[str, np.ndarray]:
             parts = _split(record, model.m)
             rate = float(parts["J"] @ speed)
             force, load = friction_force(parts, multipliers, rate)
+            j = joints.index(joint)
+            if held is not None and np.isfinite(held[i, j]):
+                force = float(held[i, j])
             columns[f"{joint.name}.friction"][i] = force
             columns[f"{joint.name}.normal_load"][i] = load
             columns[f"{joint.name}.rate"][i] = rate

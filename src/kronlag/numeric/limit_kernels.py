@@ -33,12 +33,12 @@ class LimitKernels:
         self.names = tuple(side.name for side in self.sides)
         q, qd, p = list(system.coordinates), list(system.speeds), list(system.parameters)
         self._symbols = (q, p)
-        self.gaps = sp.Matrix([side.gap for side in self.sides])
+        self.gaps = sp.Matrix(len(self.sides), 1, [side.gap for side in self.sides])  # (0, 1) without limits
         jacobian = self.gaps.jacobian(q)
         velocity = jacobian * sp.Matrix(qd)
         gamma = velocity.jacobian(q) * sp.Matrix(qd)
-        restitution = sp.Matrix([side.restitution for side in self.sides])
-        bounds = sp.Matrix([side.bound for side in self.sides])
+        restitution = sp.Matrix(len(self.sides), 1, [side.restitution for side in self.sides])
+        bounds = sp.Matrix(len(self.sides), 1, [side.bound for side in self.sides])
         self._python = sp.lambdify((q, qd, p), (self.gaps, jacobian, gamma, restitution, bounds), modules="numpy",
                                    cse=True, dummify=True)
         self._gaps_only = sp.lambdify((q, p), self.gaps, modules="numpy", cse=True, dummify=True)

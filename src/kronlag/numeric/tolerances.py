@@ -50,7 +50,7 @@ from ..core.errors import InputError
 
 __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
            "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "ZERO_EIGENVALUE_RTOL", "RESTING_GAP",
-           "CONTACT_GAP", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "SAME_INSTANT", "integrator_tolerances",
+           "CONTACT_GAP", "AT_REST", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "SAME_INSTANT", "integrator_tolerances",
            "zero_eigenvalue_threshold", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes",
            "singular_ratio", "c_macros", "REDUNDANCY_PROBE", "REDUNDANCY_PROBE_RESIDUAL"]
 
@@ -116,6 +116,11 @@ REDUNDANCY_PROBE = 1e-4
 #: ``rank_rtol`` times the largest singular value of ``Phi_q``: off the constraints by ``|Phi|``, redundant
 #: rows have magnitudes of about ``|Phi|``, which must stay well below the rank tolerance.
 REDUNDANCY_PROBE_RESIDUAL = 1e-2
+
+# -- exact stiction (kronlag.simulation.stiction) --
+#: A joint with the exact friction law whose rate is within AT_REST * atol of zero at the start of a
+#: run is at rest: it sticks or slips as its holding force decides (a rate above that slides).
+AT_REST = 1.0
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float,

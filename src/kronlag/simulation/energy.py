@@ -20,7 +20,7 @@ import numpy as np
 
 from ..numeric.friction import friction_columns, friction_joints
 
-__all__ = ["nonconservative_work", "friction_work"]
+__all__ = ["friction_work", "nonconservative_work"]
 
 
 def _friction_power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:
@@ -82,9 +82,25 @@ def _work(power_of, model, t: np.ndarray, q, qd, qdd) -> np.ndarray:
     power = np.array([power_of(model, *state) for state in zip(t, q, qd)])
     scale = np.max(np.diff(t)) if len(t) > 1 else 1.0
     step = 1e-6 * scale
-    rate = np.array([(power_of(model, time + step, x + step * v, v + step * a)
-                      - power_of(model, time - step, x - step * v, v - step * a)) / (2 * step)
-                     for time, x, v, a in zip(t, q, qd, qdd)])
+
+    def along(k: int, e: float) -> float:
+        return power_of(model, t[k] + e, q[k] + e * qd[k], qd[k] + e * qdd[k])
+
+    # a segment's end (or start) is a sample repeated at one time (an event: an impact, a joint that
+    # sticks or reverses, where the power jumps or has a kink), as are the motion's ends: there the
+    # power and its rate come from that segment's side only, extrapolated from two points along the
+    # motion (the sample itself may lie on the event's other side by the root's tolerance)
+    ends = np.zeros(len(t), dtype=int)
+    repeated = np.flatnonzero(np.diff(t) == 0)
+    ends[repeated], ends[repeated + 1] = -1, 1
+    ends[0], ends[-1] = 1, -1
+    rate = np.empty(len(t))
+    for k, side in enumerate(ends):
+        if side == 0:
+            rate[k] = (along(k, step) - along(k, -step)) / (2 * step)
+            continue
+        near, far = along(k, side * step), along(k, 2 * side * step)
+        power[k], rate[k] = 2 * near - far, (far - near) / (side * step)
     return _integrated(t, power, rate)
 
 

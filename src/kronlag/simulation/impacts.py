@@ -20,7 +20,9 @@ integrator's tolerance), and there:
 * **release**: a held side whose contact force ``-lambda`` falls through zero is free again.
 
 Each is a :class:`~.trajectory.LimitEvent` in ``trajectory.events``; ``trajectory.limit_forces``
-holds the contact forces.
+holds the contact forces.  The same loop drives exact stiction (:mod:`.stiction`): a segment's model
+is the variant of the joints' friction modes, with the contacts held, and the joints' watched
+functions follow the contacts'.
 """
 
 from __future__ import annotations
@@ -33,18 +35,20 @@ from dataclasses import replace
 import numpy as np
 
 from ..core.errors import InputError
+from ..numeric.friction import friction_joints, has_stiction
 from ..numeric.limit_kernels import LimitKernels, limit_kernels
 from ..numeric.numeric_model import NumericModel
 from ..numeric.projection import project_positions
-from ..numeric.tolerances import CONTACT_GAP, RESTING_GAP, SAME_INSTANT
+from ..numeric.tolerances import AT_REST, CONTACT_GAP, RESTING_GAP, SAME_INSTANT
 from ..symbolic.derivation import derive
 from .controllers import ControlledModel, solve_sampled
 from .problem import MultibodyProblem, Solution, Solver, derived_shapes
 from .stepping import stopped_text
+from .stiction import held_forces, start_modes, stiction_model, transition
 from .trajectory import LimitEvent, Result
 from .watch import LimitWatch
 
-__all__ = ["has_limits", "solve_with_limits", "contact_model"]
+__all__ = ["contact_model", "has_events", "has_limits", "solve_with_limits"]
 
 
 #: Most events at one instant (simultaneous impacts, a contact made and released) before the run
@@ -55,6 +59,11 @@ _MAX_EVENTS_AT_ONE_TIME = 20
 def has_limits(model: NumericModel) -> bool:
     """Whether ``model``'s system has limits."""
     return bool(getattr(model.equations.system, "limits", ()))
+
+
+def has_events(model: NumericModel) -> bool:
+    """Whether a run of ``model`` goes segment by segment: limits or exact stiction."""
+    return has_limits(model) or has_stiction(model.equations.system)
 
 
 # -- the models with contacts held as constraints ------------------------------------------------
@@ -113,6 +122,9 @@ def solve_with_limits(solver: Solver, problem: MultibodyProblem, derived_of: Cal
     event (within :data:`~kronlag.numeric.tolerances.SAME_INSTANT`) is taken with the state before
     the event (the impulse follows it)."""
     model, options = problem.model, solver.options
+    if has_stiction(model.equations.system) and solver.name not in ("compiled", "projection", "baumgarte"):
+        raise InputError(f"method={solver.name!r} does not support exact stiction (friction law 'exact'); use "
+                         "'compiled' (the default with friction), 'projection' or 'baumgarte'")
     if solver.name == "ggl":
         raise InputError("method='ggl' does not watch limits; use 'switching' (the default), 'compiled', "
                          "'ali3p', 'baumgarte' or 'projection'")
@@ -135,6 +147,19 @@ class _LimitRun:
         self._last_impulses: dict[int, float] = {}
         self.first_step = 0.0
         self.loop = self.model.loop if isinstance(self.model, ControlledModel) else None
+        system = self.model.equations.system
+        self.friction_names = [joint.name for joint in friction_joints(system)]
+        self.stiction = has_stiction(system)
+        self.modes: tuple[int, ...] = ()
+
+    def _variant_of(self, modes: tuple[int, ...]) -> NumericModel:
+        """A segment's model with the joints' friction in ``modes`` and the current contacts held."""
+        return contact_model(stiction_model(self.model, modes), self.active)
+
+    @property
+    def base(self) -> NumericModel:
+        """The model with the joints' friction in their current modes (:func:`~.stiction.stiction_model`)."""
+        return stiction_model(self.model, self.modes)
 
     def solve(self) -> Solution:
         problem, m, n = self.problem, self.problem.m, len(self.kernels)
@@ -143,10 +168,11 @@ class _LimitRun:
         steps = nfev = njev = 0
         same_time, last_t = 0, None
         while True:
-            variant = contact_model(self.model, self.active)
+            variant = contact_model(self.base, self.active)
             watch = LimitWatch(self.kernels, np.array([i not in self.active for i in range(n)]),
                                tuple(range(self.model.r, variant.r)), self.first_step,
-                               None if variant.time_varying else variant.parameter_vector(t))
+                               None if variant.time_varying else variant.parameter_vector(t),
+                               len(self.friction_names))
             self.first_step = 0.0
             t_eval = problem.t_eval
             if t_eval is not None and t > problem.t0:
@@ -203,7 +229,14 @@ class _LimitRun:
     # -- events ------------------------------------------------------------------------------
 
     def _start(self, t: float, y: np.ndarray) -> np.ndarray:
-        """The sides in contact at the start (gap within :data:`CONTACT_GAP` ``atol``) treated as impacts."""
+        """The sides in contact at the start (gap within :data:`CONTACT_GAP` ``atol``) treated as impacts;
+        the joints' friction modes by the start rule of :mod:`.stiction`."""
+        if self.friction_names:
+            self.modes, events = start_modes(self.model, self._variant_of, t, y, self.options.atol)
+            self.events += events
+            y = self._project(t, y)
+        if not len(self.kernels):
+            return y
         gaps = self.kernels.gap(y[:self.problem.m], self.model.parameter_vector(t))
         touching = tuple(int(i) for i in np.flatnonzero(gaps <= CONTACT_GAP * self.options.atol))
         return self._events(t, y, touching) if touching else y
@@ -211,6 +244,10 @@ class _LimitRun:
     def _events(self, t: float, y: np.ndarray, triggered: tuple[int, ...]) -> np.ndarray:
         """Apply the events ``triggered`` (indices of the watched functions) at ``(t, y)``; the state after."""
         n, m = len(self.kernels), self.problem.m
+        joints = [k - n - len(self.active) for k in triggered if k >= n + len(self.active)]
+        if joints:
+            y = self._stiction(t, y, joints)
+            triggered = tuple(k for k in triggered if k < n + len(self.active))
         released = [self.active[k - n] for k in triggered if k >= n]
         for i in released:
             self.events.append(LimitEvent(t=t, side=self.kernels.names[i], kind="release", q=y[:m].copy()))
@@ -220,7 +257,7 @@ class _LimitRun:
             return self._project(t, y)
         # on the stops exactly (the root's state is off them by the root's tolerance or an
         # interpolation's error): a gap left below zero would hide the next crossing
-        touching = contact_model(self.model, tuple(sorted(set(self.active) | set(impacting))))
+        touching = contact_model(self.base, tuple(sorted(set(self.active) | set(impacting))))
         q = project_positions(touching, y[:m], t, tol=self.options.projection_tol).q
         y = self._project(t, np.concatenate([q, y[m:]]))
         q, qd = y[:m], y[m:]
@@ -230,7 +267,7 @@ class _LimitRun:
         closing = [i for i, speed in zip(impacting, before) if speed < 0]
         qd_after = self._impulse(t, q, qd, closing, J, e) if closing else qd
         # the Zeno rule: a rebound that lifts the gap by at most RESTING_GAP atol (or none) makes a contact
-        free = contact_model(self.model, self.active).forward_dynamics(q, qd_after, t)
+        free = contact_model(self.base, self.active).forward_dynamics(q, qd_after, t)
         acceleration = J @ free.qdd + values["gamma"]
         rest_height = RESTING_GAP * self.options.atol
         resting = [i for i in impacting
@@ -250,7 +287,7 @@ class _LimitRun:
                                               speed_after=float(J[i] @ qd_after)))
         if resting:
             held = tuple(sorted(set(self.active) | set(resting)))
-            lam = contact_model(self.model, held).forward_dynamics(q, qd_after, t).lam
+            lam = contact_model(self.base, held).forward_dynamics(q, qd_after, t).lam
             forces = {i: float(-lam[self.model.r + k]) for k, i in enumerate(held)}
             resting = [i for i in resting if forces[i] > 0]  # a contact that would pull is not held
             self.active = tuple(sorted(set(self.active) | set(resting)))
@@ -263,11 +300,19 @@ class _LimitRun:
                                               force=forces[i], reason=reason))
         return self._project(t, np.concatenate([q, qd_after]))
 
+    def _stiction(self, t: float, y: np.ndarray, joints: list[int]) -> np.ndarray:
+        """The transitions of the joints with friction ``joints`` (their functions fell through zero) at
+        ``(t, y)`` (:mod:`.stiction`); the state after, on the new modes' constraints."""
+        self.modes, events = transition(self._variant_of, self.modes, joints, t, y, self.friction_names,
+                                        AT_REST * self.options.atol)
+        self.events += events
+        return self._project(t, y)
+
     def _impulse(self, t: float, q: np.ndarray, qd: np.ndarray, sides: list[int], J: np.ndarray,
                  restitution: np.ndarray) -> np.ndarray:
         """``qd+`` after the impulse on ``sides`` (see the module docstring); the impulses by side are
         kept in ``_last_impulses`` (positive: pushing the gap open)."""
-        model = contact_model(self.model, self.active)
+        model = contact_model(self.base, self.active)
         terms = model.dynamics_terms(q, qd, t)
         B = np.vstack([terms["Phi_q"].reshape(-1, len(q)), terms["A"].reshape(-1, len(q))])
         rows = J[sides]
@@ -285,7 +330,7 @@ class _LimitRun:
 
     def _project(self, t: float, y: np.ndarray) -> np.ndarray:
         """``y`` projected onto the constraints of the current contact set."""
-        held = replace(self.problem, model=contact_model(self.model, self.active), watch=None)
+        held = replace(self.problem, model=contact_model(self.base, self.active), watch=None)
         return held.project(t, y, self.options.projection_tol)
 
     # -- outputs -------------------------------------------------------------------------------
@@ -304,7 +349,11 @@ class _LimitRun:
         velocity = derived["velocity_residual"]
         piece = dict(derived, lam=derived["lam"][:, :r], position_residual=derived["position_residual"][:, :r],
                      velocity_residual=np.concatenate([velocity[:, :r], velocity[:, r + held:r + held + s]], axis=1),
-                     limit_forces=forces, t=solution.t, y=solution.y)
+                     mu=derived["mu"][:, :s], limit_forces=forces, t=solution.t, y=solution.y)
+        if self.stiction:  # the holding forces of the joints that stick, rows after the model's own
+            piece["friction_held"] = held_forces(variant, s, self.modes, derived["mu"])
+        if not len(self.kernels):
+            del piece["limit_forces"]
         if parameters is not None:  # under a controller: the inputs at the outputs
             piece["parameters"] = parameters
         self.pieces.append(piece)
@@ -316,6 +365,10 @@ class _LimitRun:
                  "limit_forces": np.empty((0, len(self.kernels))), "t": np.empty(0), "y": np.empty((0, 2 * m))}
         if self.loop is not None:
             empty["parameters"] = np.empty((0, len(self.model.parameter_names)))
+        if self.stiction:
+            empty["friction_held"] = np.empty((0, len(self.friction_names)))
+        if not len(self.kernels):
+            del empty["limit_forces"]
         return empty
 
     def _solution(self, result: Result, message: str, steps: int, nfev: int, njev: int) -> Solution:

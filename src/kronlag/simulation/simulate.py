@@ -19,7 +19,7 @@ from ..core.limits import MAX_OUTPUT_POINTS
 from ..numeric.linalg import velocity_constraints
 from .control import RunControl
 from .controllers import ControlledModel, ControlLoop, Sampled, controlled, solve_sampled
-from .impacts import has_limits, solve_with_limits
+from .impacts import has_events, solve_with_limits
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
 from .solvers import AUTO_PREFERENCE, METHODS, SAMPLED_PREFERENCE
 from .trajectory import MethodInterval, Trajectory
@@ -259,7 +259,7 @@ def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, metho
         loop.start(t0, problem.y0)
         problem = controlled(problem, loop)
     with control.catching_sigint():
-        if has_limits(model):  # limits: segments between the impacts and contact changes
+        if has_events(model):  # limits: segments between the impacts and contact changes
             solution = solve_with_limits(solver(options), problem, _derived)
         elif loop is not None and loop.sampled and not solver.samples_inside:
             solution = solve_sampled(solver(options), problem, loop)

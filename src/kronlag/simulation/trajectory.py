@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
     from ..numeric.numeric_model import NumericModel
 
-__all__ = ["Trajectory", "SingularPassage", "LimitEvent", "Result", "MethodInterval"]
+__all__ = ["Trajectory", "SingularPassage", "LimitEvent", "StictionEvent", "Result", "MethodInterval"]
 
 
 class Result(enum.Enum):
@@ -147,6 +147,39 @@ class MethodInterval:
 
     def __str__(self) -> str:
         return f"{self.method} from t = {self.t_start:.6g} to {self.t_end:.6g} ({self.steps} steps): {self.reason}"
+
+
+@dataclass(frozen=True)
+class StictionEvent:
+    """A transition of a joint with exact stiction (``Friction(law="exact")``, :mod:`kronlag.simulation.stiction`).
+
+    Attributes
+    ----------
+    t : float
+    joint : str
+    kind : str
+        ``"stick"`` (its rate reached zero and the holding force is within ``r mu_s N``: held from
+        here), ``"slip"`` (the holding force reached ``r mu_s N``, or exceeded it at the start: it slides
+        from here in that force's direction) or ``"reverse"`` (its rate reached zero and it slides on the
+        other way).
+    q : (m,)
+    force : float
+        The holding force (torque) at ``t`` (N or N*m; its sign is the direction it slides in after a
+        slip).
+    threshold : float
+        ``r mu_s N`` at ``t``.
+    """
+
+    t: float
+    joint: str
+    kind: str
+    q: np.ndarray
+    force: float = 0.0
+    threshold: float = 0.0
+
+    def __str__(self) -> str:
+        return (f"{self.kind} of joint {self.joint!r} at t = {self.t:.9g} (holding force {self.force:.6g}, "
+                f"limit {self.threshold:.6g})")
 
 
 @dataclass(frozen=True)
@@ -270,6 +303,10 @@ class Trajectory(ColumnExport):
     limit_forces : (N, n) or None
         For a model with limits: the force of each limit side's contact along its gap (0 when
         not in contact), columns in the order of the sides (every bound of every limit, lower first).
+    friction_held : (N, n) or None
+        For a model with exact stiction: the holding force of each joint with friction while it
+        sticks (NaN while it slides), in the order of the joints; the ``<joint>.friction`` column
+        shows it there.
     result : Result
         How the integration ended; :attr:`status` (0 success, -1 failure: the arrays then hold
         the solution up to the failure) and :attr:`success` follow from it.
@@ -313,9 +350,10 @@ class Trajectory(ColumnExport):
     njev: int
     steps: int
     wall_time: float
-    events: tuple[SingularPassage | LimitEvent, ...] = ()
+    events: tuple[SingularPassage | LimitEvent | StictionEvent, ...] = ()
     result: Result = Result.SUCCESS
     limit_forces: np.ndarray | None = None
+    friction_held: np.ndarray | None = None
     inputs: dict[str, np.ndarray] = field(default_factory=dict)
     intervals: tuple[MethodInterval, ...] = ()
 
@@ -386,7 +424,7 @@ class Trajectory(ColumnExport):
             sides = [side.name for limit in self.model.equations.system.limits for side in limit.sides]
             columns.update({f"{side}.force": self.limit_forces[:, i] for i, side in enumerate(sides)})
         if friction_joints(self.model.equations.system):  # joint friction: force, normal load and rate by joint
-            columns.update(friction_columns(self.model, self.t, self.q, self.qd, self.lam))
+            columns.update(friction_columns(self.model, self.t, self.q, self.qd, self.lam, self.friction_held))
         return columns
 
     def reaction(self, name: str, *, frame: str = "world") -> Reaction:

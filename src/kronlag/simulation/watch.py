@@ -2,7 +2,8 @@
 
 The watched functions, each positive while nothing happens and falling through zero at an event:
 the gaps ``g_i(q)`` of the limit sides not in contact, then the contact forces ``-lambda_j`` of the
-sides held as constraints (rows ``contact_rows`` of the segment's model).  An integrator that sees
+sides held as constraints (rows ``contact_rows`` of the segment's model), then per joint with friction
+its exact stiction's function (:mod:`.stiction`).  An integrator that sees
 one fall through zero ends its segment there with :attr:`~.trajectory.Result.LIMIT` and a
 :class:`LimitStop`: the compiled ones by root finding (CVODE's ``CVodeRootInit``; ALI3-P by the
 secant method on its step's interpolant), the Python ones by Brent's method on the dense output
@@ -18,6 +19,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ..core.errors import SingularConfigurationError
+from ..numeric.friction import friction_records, stiction_values
 from ..numeric.limit_kernels import LimitKernels
 
 __all__ = ["LimitStop", "LimitWatch", "locate"]
@@ -39,6 +41,9 @@ class LimitWatch:
         choice): a crossing is seen only from a step that ends with the gap open.
     parameters : (P,) or None
         The model's parameter vector when it is constant (None: asked of the model at each ``t``).
+    friction : int
+        The joints with friction, each watched after the contacts (exact stiction,
+        :func:`~kronlag.numeric.friction.stiction_values`; 1 for a joint with the smooth law).
     """
 
     kernels: LimitKernels
@@ -46,23 +51,28 @@ class LimitWatch:
     contact_rows: tuple[int, ...]
     first_step: float = 0.0
     parameters: np.ndarray | None = None
+    friction: int = 0
 
     @property
     def size(self) -> int:
-        return len(self.kernels) + len(self.contact_rows)
+        return len(self.kernels) + len(self.contact_rows) + self.friction
 
     def values(self, model, t: float, y: np.ndarray) -> np.ndarray:
         """The watched functions at ``(t, y)``; 1 for a side held as a constraint, shape (:attr:`size`,)."""
         m = model.m
         p = self.parameters if self.parameters is not None else model.parameter_vector(t)
-        gaps = np.where(self.watched, self.kernels.gap(y[:m], p), 1.0)
-        if not self.contact_rows:
+        gaps = np.where(self.watched, self.kernels.gap(y[:m], p), 1.0) if len(self.kernels) else np.empty(0)
+        if not self.contact_rows and not self.friction:
             return gaps
         try:
-            lam = model.forward_dynamics(y[:m], y[m:], t).lam
+            solution = model.forward_dynamics(y[:m], y[m:], t)
+            lam, nu = solution.lam, np.concatenate([solution.lam, solution.mu])
         except SingularConfigurationError:
-            lam = np.full(model.r, np.nan)
-        return np.concatenate([gaps, -lam[list(self.contact_rows)]])
+            lam = nu = np.full(model.r + model.s, np.nan)
+        values = [gaps, -lam[list(self.contact_rows)]]
+        if self.friction:
+            values.append(stiction_values(friction_records(model, t, y[:m], y[m:]), y[m:], nu))
+        return np.concatenate(values)
 
 
 @dataclass(frozen=True, eq=False)

@@ -127,9 +127,12 @@ static int kl_roots(sunrealtype t, N_Vector y, sunrealtype *gout, void *user_dat
     kl_data *data = user_data;
     const double *x = N_VGetArrayPointer(y);
     double qdd[KL_M + 1], lam[KL_R + 1], mu[KL_S + 1];
-    if (data->o->n_contacts > 0
-        && kronlag_forward_dynamics(t, x, x + KL_M, data->p, 0.0, 0.0, qdd, lam, mu)) return -1;
+    if (data->o->n_contacts > 0 && kronlag_forward_dynamics(t, x, x + KL_M, data->p, 0.0, 0.0, qdd, lam, mu)) return -1;
     kl_limit_values(data->o, x, lam, gout);
+#if KRONLAG_STICTION_WATCHED > 0
+    if (kronlag_stiction_values(t, x, x + KL_M, data->p, data->o->n_contacts > 0 ? lam : NULL, mu,
+                                gout + data->o->n_gaps + data->o->n_contacts)) return -1;
+#endif
     return 0;
 }
 

@@ -4,10 +4,11 @@
  * the contact forces -lam[row] of the held ones (o->contact_rows): each positive while nothing
  * happens; a segment ends where one falls through zero. */
 
-/* The number of watched functions (0: no limits). */
+/* The number of watched functions (0: no limits); after the gaps and contacts, one per joint with
+ * friction (exact stiction, kronlag_stiction_values in augmented.c). */
 static int kl_limit_count(const kronlag_options *o)
 {
-    return o->gaps ? o->n_gaps + o->n_contacts : 0;
+    return o->gaps ? o->n_gaps + o->n_contacts + KRONLAG_STICTION_WATCHED : 0;
 }
 
 /* The watched functions at q with the multipliers lam (used only when o->n_contacts > 0). */

@@ -93,6 +93,9 @@ static int kronlag_solve_many(const double *terms, const double *qd, double alph
 }
 
 #ifdef KRONLAG_FRICTION
+int kronlag_forward_dynamics(double t, const double *q, const double *qd, const double *p,
+                             double alpha, double beta, double *qdd, double *lam, double *mu);
+
 /* Joint friction: kronlag.numeric.friction is the reference of this code (the same records, from the
  * kernel kronlag_friction, and the same steps). |v - (v.u) u| for 3-vectors. */
 static double kronlag_perpendicular(const double *v, const double *u)
@@ -115,8 +118,19 @@ static void kronlag_friction_wrench(const double *record, const double *lam, dou
 }
 
 /* The fields after J_rate (m), W (36) and the rows (6): u_force (3), u_couple (3), then RECORD_FIELDS:
- * static, kinetic, viscous, stribeck_velocity, radius, 1/arm, preload, smoothing_velocity. */
+ * static, kinetic, viscous, stribeck_velocity, radius, 1/arm, preload, smoothing_velocity, mode,
+ * hold_row (the modes of kronlag.model.friction: 0 smooth, +-1 sliding that way, 2 sign(v), 3 held). */
 #define KRONLAG_FRICTION_FIELDS(record) ((record) + KRONLAG_M + 48)
+enum { KRONLAG_MODE_SMOOTH = 0, KRONLAG_MODE_SIGN = 2, KRONLAG_MODE_HELD = 3 };
+
+/* The law's sign(v) by the record's mode. */
+static double kronlag_friction_direction(const double *c, double rate)
+{
+    int mode = (int)c[8];
+    if (mode == KRONLAG_MODE_SMOOTH) return tanh(rate / c[7]);
+    if (mode == KRONLAG_MODE_SIGN) return (rate > 0.0) - (rate < 0.0);
+    return mode == KRONLAG_MODE_HELD ? 0.0 : (double)mode;
+}
 
 /* r mu(v): the factor of the normal load in one joint's friction force at the rate v. */
 static double kronlag_friction_coefficient(const double *record, double rate)
@@ -124,7 +138,7 @@ static double kronlag_friction_coefficient(const double *record, double rate)
     const double *c = KRONLAG_FRICTION_FIELDS(record);
     double mu = c[1];
     if (c[3] > 0.0) { double x = rate / c[3]; mu += (c[0] - c[1]) * exp(-x * x); }
-    return c[4] * mu * tanh(rate / c[7]);
+    return c[4] * mu * kronlag_friction_direction(c, rate);
 }
 
 /* The normal load N from the joint's wrench (friction_force in kronlag.numeric.friction). */
@@ -163,6 +177,11 @@ static int kronlag_small_solve(double *A, double *b, int n)
  * unit friction force of each joint (the forcing -J_j, right-hand sides sharing the factorization)
  * give the solution for any friction forces f, and f = phi(lambda(f)) is found by Newton steps
  * to KRONLAG_FRICTION_RTOL.  Returns 0, 1 (singular) or 2 (the friction forces did not converge). */
+/* The friction forces of the last solve in this thread: the next one starts its Newton steps there (an
+ * integrator's evaluations follow each other closely: a step or two instead of four or five from
+ * zero), and from zero again should they not converge from there. */
+static _Thread_local double kronlag_friction_last[KRONLAG_FRICTION];
+
 static int kronlag_friction_solve(double t, const double *q, const double *qd, const double *p, const double *terms,
                                   double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
 {
@@ -173,7 +192,7 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
     for (int j = 0; j < nf; ++j) {
         const double *J = records + j * size;
         rates[j] = 0.0;
-        forces[j] = 0.0;
+        forces[j] = kronlag_friction_last[j];
         for (int i = 0; i < m; ++i) { forcing[j * m + i] = -J[i]; rates[j] += J[i] * qd[i]; }
     }
     int status = kronlag_solve_many(terms, qd, alpha, beta, max_rank, nf + 1, forcing, accelerations, multipliers,
@@ -188,12 +207,15 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
         kronlag_friction_wrench(record, multipliers, wrench[j]);
         for (int i = 0; i < nf; ++i) kronlag_friction_wrench(record, dnu + i * (k + 1), response[j][i]);
         factor[j] = kronlag_friction_coefficient(record, rates[j]);
-        viscous[j] = KRONLAG_FRICTION_FIELDS(record)[2] * rates[j];
+        viscous[j] = (int)KRONLAG_FRICTION_FIELDS(record)[8] == KRONLAG_MODE_HELD ? 0.0
+                     : KRONLAG_FRICTION_FIELDS(record)[2] * rates[j];
     }
     /* Newton steps on g(f) = f - r mu N(f) - c v = 0 (N(f) piecewise linear in f: its derivative is the
      * unit direction of the force and couple parts times their responses), from f = 0 */
     int converged = 0;
-    for (int step = 0; step < KRONLAG_FRICTION_MAX_ITERATIONS && !converged; ++step) {
+    for (int step = 0; step < 2 * KRONLAG_FRICTION_MAX_ITERATIONS && !converged; ++step) {
+        if (step == KRONLAG_FRICTION_MAX_ITERATIONS)  /* not from the last forces: from zero */
+            for (int j = 0; j < nf; ++j) forces[j] = 0.0;
         double jacobian[nf * nf], residual[nf];
         for (int j = 0; j < nf; ++j) {
             const double *record = records + j * size, *u_force = record + m + 42, *u_couple = u_force + 3;
@@ -219,7 +241,11 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
                 jacobian[j * nf + i] = (i == j) - factor[j] * slope;
             }
         }
-        if (kronlag_small_solve(jacobian, residual, nf)) return 2;
+        if (kronlag_small_solve(jacobian, residual, nf)) {
+            if (step >= KRONLAG_FRICTION_MAX_ITERATIONS) return 2;
+            step = KRONLAG_FRICTION_MAX_ITERATIONS - 1;  /* from zero */
+            continue;
+        }
         double change = 0.0, largest = 0.0;
         for (int j = 0; j < nf; ++j) {
             forces[j] -= residual[j];
@@ -229,6 +255,7 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
         converged = change <= KRONLAG_FRICTION_RTOL * largest;
     }
     if (!converged) return 2;
+    memcpy(kronlag_friction_last, forces, sizeof forces);
     for (int i = 0; i < m; ++i) {
         qdd[i] = accelerations[i];
         for (int j = 0; j < nf; ++j) qdd[i] += forces[j] * dqdd[j * m + i];
@@ -239,6 +266,47 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
     }
     return 0;
 }
+
+/* Exact stiction (kronlag.simulation.stiction): what a run watches per joint with friction, each
+ * positive while nothing happens -- d v for a joint sliding in the direction d, r mu_s N - |f| for a
+ * held one (f = nu[hold_row], nu = [lam; mu] from the forward dynamics without Baumgarte terms), 1
+ * otherwise (stiction_values in kronlag.numeric.friction).  lam and mu: the multipliers at the state,
+ * or NULL: then solved here only when a joint is held (sliding ones need the rates alone, and the
+ * root function is called at every step).  Returns 0, or the forward dynamics' failure. */
+static int kronlag_stiction_values(double t, const double *q, const double *qd, const double *p, const double *lam,
+                                   const double *mu, double *out)
+{
+    enum { m = KRONLAG_M, r = KRONLAG_R, s = KRONLAG_S, k = KRONLAG_K, nf = KRONLAG_FRICTION,
+           size = KRONLAG_FRICTION_RECORD };
+    double records[nf * size + 1], nu[k + 1], wrench[6], own_lam[r + 1], own_mu[s + 1], qdd[m + 1];
+    kronlag_friction(t, q, qd, p, records);
+    int held = 0;
+    for (int j = 0; j < nf; ++j) held |= (int)KRONLAG_FRICTION_FIELDS(records + j * size)[8] == KRONLAG_MODE_HELD;
+    if (held && !lam) {
+        int status = kronlag_forward_dynamics(t, q, qd, p, 0.0, 0.0, qdd, own_lam, own_mu);
+        if (status) return status;
+        lam = own_lam;
+        mu = own_mu;
+    }
+    for (int i = 0; i < k && held; ++i) nu[i] = i < r ? lam[i] : mu[i - r];
+    for (int j = 0; j < nf; ++j) {
+        const double *record = records + j * size, *c = KRONLAG_FRICTION_FIELDS(record);
+        int mode = (int)c[8];
+        out[j] = 1.0;
+        if (mode == 1 || mode == -1) {
+            double rate = 0.0;
+            for (int i = 0; i < m; ++i) rate += record[i] * qd[i];
+            out[j] = mode * rate;
+        } else if (mode == KRONLAG_MODE_HELD) {
+            kronlag_friction_wrench(record, nu, wrench);
+            out[j] = c[4] * c[0] * kronlag_friction_load(record, wrench) - fabs(nu[(int)c[9]]);
+        }
+    }
+    return 0;
+}
+#define KRONLAG_STICTION_WATCHED KRONLAG_FRICTION
+#else
+#define KRONLAG_STICTION_WATCHED 0
 #endif
 
 /* The solve at a state: with the joints' friction when the model has any. */

@@ -1,0 +1,224 @@
+"""Exact stiction (``Friction(law="exact")``): joints that slide, stick and slip during a run.
+
+A run of a model with the exact law is a sequence of segments, like a run with limits (it is driven
+by the same loop, :mod:`.impacts`).  Within a segment each such joint has a *mode*:
+
+* **sliding** in the direction ``d = +-1``: its friction is ``r mu(v) N d + c v`` (``mu`` with the
+  Stribeck term when a ``stribeck_velocity`` is given; ``N`` from the reactions solved with ``qdd``),
+  ``d`` fixed for the segment so that the right-hand side stays smooth where ``v`` passes zero; the
+  watched function is ``d v``;
+* **held** (stuck): the constraint ``v = J_rate qd = 0`` is a nonholonomic row of the segment's model,
+  whose multiplier is the friction force ``f``; the watched function is ``r mu_s N - |f|`` (``N`` from
+  the reactions of that solve).
+
+Where one falls through zero (root finding to the integrator's tolerance, as for the limits):
+
+* a sliding joint's rate reached zero: held, if the holding force then satisfies ``|f| <= r mu_s N``
+  (event ``stick``), else it slides on in the direction of ``f`` (``reverse`` when that is the
+  other way: a swing's turning point);
+* a held joint's ``|f|`` reached ``r mu_s N``: it slides in the direction of ``f`` (event ``slip``).
+
+The rule at the start: a joint whose rate is within :data:`~kronlag.numeric.tolerances.AT_REST`
+``atol`` of zero is at rest and decided as a joint that has just stopped (all such joints held
+together: each sticks if its holding force is within ``r mu_s N``, else slides in that force's
+direction); any other slides in the direction of its rate.  Joints that stop at one instant are
+decided together in the same way.  Each transition is a :class:`~.trajectory.StictionEvent` in
+``trajectory.events``.
+"""
+
+from __future__ import annotations
+
+import copy
+import weakref
+from collections.abc import Callable
+
+import numpy as np
+
+from ..model.friction import (
+    MODE_HELD,
+    MODE_SMOOTH,
+    friction_record,
+    stick_constraint_name,
+)
+from ..numeric.friction import friction_joints, friction_records, sticking_limit
+from ..numeric.numeric_model import NumericModel
+from ..numeric.tolerances import AT_REST, matrix_rank
+from ..symbolic.derivation import derive
+from .controllers import ControlledModel
+from .trajectory import StictionEvent
+
+__all__ = ["held_forces", "start_modes", "stiction_model", "transition"]
+
+_STICTION_EQUATIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_STICTION_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def stiction_model(model: NumericModel, modes: tuple[int, ...]) -> NumericModel:
+    """``model`` with its joints with friction in ``modes`` (one per joint, :data:`MODE_SMOOTH` for the
+    smooth law; +-1 sliding, :data:`MODE_HELD` held by a nonholonomic row ``"stick <joint>"`` appended
+    after its own); derived and compiled once per set of modes.  Under a controller, under the same."""
+    if not modes or all(mode == MODE_SMOOTH for mode in modes):
+        return model
+    if isinstance(model, ControlledModel):
+        return ControlledModel.of(stiction_model(model.uncontrolled, modes), model.loop)
+    models = _STICTION_MODELS.setdefault(model, {})
+    if modes not in models:
+        by_modes = _STICTION_EQUATIONS.setdefault(model.equations, {})
+        if modes not in by_modes:
+            system = model.equations.system
+            variant = copy.copy(system)
+            variant.nonholonomic_constraints = list(system.nonholonomic_constraints)
+            joints = friction_joints(system)
+            # read by friction_record (the record's mode field); not an attribute of every System
+            variant.__dict__["stiction_modes"] = {joint.name: mode for joint, mode in zip(joints, modes)}
+            for joint, mode in zip(joints, modes):
+                if mode == MODE_HELD:
+                    rate = friction_record(system, joint)[:len(system.coordinates), 0]
+                    speed = sum(a * b for a, b in zip(rate, system.speeds))
+                    variant.add_nonholonomic_constraint(speed, name=stick_constraint_name(joint.name))
+            by_modes[modes] = derive(variant)
+        parameters = model.__getstate__()["parameters"]
+        models[modes] = NumericModel(by_modes[modes], parameters, backend=model.backend, rank_rtol=model.rank_rtol)
+    return models[modes]
+
+
+def held_forces(model: NumericModel, base_s: int, modes: tuple[int, ...], mu: np.ndarray) -> np.ndarray:
+    """The friction force of each joint with friction held in ``modes`` (NaN for the others) from the
+    multipliers ``mu`` (N, s) of the segment's model, whose rows past ``base_s`` hold the joints."""
+    forces = np.full((len(mu), len(modes)), np.nan)
+    held = [j for j, mode in enumerate(modes) if mode == MODE_HELD]
+    for k, j in enumerate(held):
+        forces[:, j] = mu[:, base_s + k]
+    return forces
+
+
+def _holding(variant: NumericModel, t: float, y: np.ndarray) -> list[tuple[float, float]]:
+    """Per joint with friction: ``(f, r mu_s N)`` at ``(t, y)`` in the segment model ``variant`` (f: the
+    holding force of a held joint, 0 for the others)."""
+    m = variant.m
+    solution = variant.forward_dynamics(y[:m], y[m:], t)
+    nu = np.concatenate([solution.lam, solution.mu])
+    records = friction_records(variant, t, y[:m], y[m:])
+    return [(float(nu[int(record["hold_row"])]) if record["mode"] == MODE_HELD else 0.0, sticking_limit(record, nu))
+            for record in records]
+
+
+def _passing(model: NumericModel, stopped: list[int], t: float, y: np.ndarray) -> list[int]:
+    """The joints of ``stopped`` whose rate vanishes at ``q`` for every motion the constraints allow (its
+    row ``J_rate`` is a combination of ``[Phi_q; A]``: a kinematic dead point of that joint, e.g. a pin of
+    a four-bar whose relative rotation reverses while the linkage moves): they cannot be held (the row
+    ``v = 0`` would also have to hold just after) and their rate passes through zero."""
+    m = model.m
+    q = y[:m]
+    rows = np.vstack([model.Phi_q(q, t).reshape(-1, m), model.A(q, t).reshape(-1, m)])
+    rank = matrix_rank(rows, model.rank_rtol) if len(rows) else 0
+    records = friction_records(model, t, q, y[m:])
+    return [j for j in stopped if matrix_rank(np.vstack([rows, records[j]["J"][None, :]]), model.rank_rtol) == rank]
+
+
+def _rate_changes(model: NumericModel, t: float, y: np.ndarray) -> np.ndarray:
+    """``dv/dt`` of every joint with friction at ``(t, y)`` in the segment model ``model``: the rate one short
+    step along the motion (``v`` is zero where this is asked)."""
+    m = model.m
+    q, qd = y[:m], y[m:]
+    qdd = model.forward_dynamics(q, qd, t).qdd
+    step = 1e-7 * max(1.0, abs(t))
+    ahead = friction_records(model, t + step, q + step * qd, qd + step * qdd)
+    now = friction_records(model, t, q, qd)
+    return np.array([(float(a["J"] @ (qd + step * qdd)) - float(b["J"] @ qd)) / step for a, b in zip(ahead, now)])
+
+
+def transition(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[int, ...], triggered: list[int],
+               t: float, y: np.ndarray, names: list[str], rest: float) -> tuple[tuple[int, ...], list[StictionEvent]]:
+    """The modes after the joints ``triggered`` (indices) had their watched functions fall through zero at
+    ``(t, y)`` (the module docstring), and the events; ``variant_of(modes)`` is a segment's model in
+    ``modes``, ``rest`` the rate below which a joint is at rest."""
+    m = len(y) // 2
+    old = modes
+    current = variant_of(modes)
+    nu = _multipliers(current, t, y)
+    records = friction_records(current, t, y[:m], y[m:])
+    rates = [float(record["J"] @ y[m:]) for record in records]
+    new = list(modes)
+    found: dict[int, tuple[float, float]] = {}  # (holding force, r mu_s N) by joint, for the events
+    for j in triggered:  # held joints whose holding force reached r mu_s N: slide along it
+        if modes[j] == MODE_HELD:
+            force = float(nu[int(records[j]["hold_row"])])
+            new[j] = 1 if force > 0 else -1
+            found[j] = (force, sticking_limit(records[j], nu))
+    stopped = [j for j, mode in enumerate(modes) if mode in (1, -1) and (j in triggered or abs(rates[j]) <= rest)]
+    passing = _passing(current, stopped, t, y)
+    for j in passing:
+        new[j] = -modes[j]
+    stopped = [j for j in stopped if j not in passing]
+    if stopped:  # held together: each sticks if its holding force is within r mu_s N
+        trial = tuple(MODE_HELD if j in stopped else mode for j, mode in enumerate(new))
+        holding = _holding(variant_of(trial), t, y)
+        for j in stopped:
+            force, threshold = found[j] = holding[j]
+            new[j] = MODE_HELD if abs(force) <= threshold else (1 if force > 0 else -1)
+    new = _consistent(variant_of, new, t, y, rest)
+    events = []
+    for j, (before, after) in enumerate(zip(old, new)):
+        if before == after:
+            continue
+        kind = "stick" if after == MODE_HELD else "slip" if before == MODE_HELD else "reverse"
+        force, threshold = found.get(j, (0.0, 0.0))
+        events.append(StictionEvent(t=t, joint=names[j], kind=kind, q=y[:m].copy(), force=force,
+                                    threshold=threshold))
+    return tuple(new), events
+
+
+def _multipliers(model: NumericModel, t: float, y: np.ndarray) -> np.ndarray:
+    solution = model.forward_dynamics(y[:model.m], y[model.m:], t)
+    return np.concatenate([solution.lam, solution.mu])
+
+
+def _consistent(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: list[int], t: float, y: np.ndarray,
+                rest: float) -> list[int]:
+    """``modes`` with every sliding joint at rest made to slide the way its rate then goes: one whose rate
+    would grow against its direction slides the other way, and one that would decelerate either way
+    sticks.  (Holding forces of redundant holds -- a linkage stopping with several joints -- are the
+    minimum-norm ones and may point a joint the wrong way: this corrects the direction.)"""
+    m = len(y) // 2
+    modes = list(modes)
+    flipped: set[int] = set()
+    for _ in range(2 * len(modes) + 1):
+        model = variant_of(tuple(modes))
+        records = friction_records(model, t, y[:m], y[m:])
+        changes = _rate_changes(model, t, y)
+        wrong = [j for j, (mode, record) in enumerate(zip(modes, records))
+                 if mode in (1, -1) and abs(float(record["J"] @ y[m:])) <= rest and mode * changes[j] < 0]
+        if not wrong:
+            return modes
+        j = wrong[0]
+        modes[j] = MODE_HELD if j in flipped else -modes[j]
+        flipped.add(j)
+    return modes
+
+
+def start_modes(model: NumericModel, variant_of: Callable[[tuple[int, ...]], NumericModel], t: float,
+                y: np.ndarray, atol: float) -> tuple[tuple[int, ...], list[StictionEvent]]:
+    """The modes at the start (the rule of the module docstring) and the events of the joints at rest."""
+    system = model.equations.system
+    joints = friction_joints(system)
+    m = model.m
+    records = friction_records(model, t, y[:m], y[m:])
+    modes = []
+    for joint, record in zip(joints, records):
+        rate = float(record["J"] @ y[m:])
+        modes.append(MODE_SMOOTH if joint.friction.law == "smooth" else 1 if rate >= 0 else -1)
+    names = [joint.name for joint in joints]
+    rest = AT_REST * atol
+    resting = [j for j, record in enumerate(records) if modes[j] != MODE_SMOOTH and abs(float(record["J"] @ y[m:])) <= rest]
+    if not resting:
+        return tuple(modes), []
+    new, _ = transition(variant_of, tuple(modes), resting, t, y, names, rest)
+    # at rest at the start: a joint that slides slips, one that is held sticks (whatever direction it was given)
+    holding = _holding(variant_of(tuple(MODE_HELD if j in resting else mode for j, mode in enumerate(modes))), t, y)
+    events = []
+    for j in resting:
+        force, threshold = holding[j]
+        events.append(StictionEvent(t=t, joint=names[j], kind="stick" if new[j] == MODE_HELD else "slip",
+                                    q=y[:m].copy(), force=force, threshold=threshold))
+    return new, events

@@ -1,0 +1,275 @@
+"""Exact stiction (issue 18.2, 18.4): ``Friction(law="exact")`` against closed forms, through the Python
+API and model files, on the default method with friction (compiled CVODE) and the Python backend."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import kronlag
+from kronlag.model.free_bodies import free_body, mechanism
+from kronlag.simulation.trajectory import StictionEvent
+
+G = 9.81
+ALPHA = 0.5  # tan(alpha) = 0.546
+MASS = 2.0
+
+
+def _backends() -> list[str]:
+    from kronlag.numeric import codegen
+
+    return ["python", "c"] if codegen.c_compiler() else ["python"]
+
+
+def _incline_system(static: float, kinetic: float):
+    m, g = sp.symbols("m g")
+    system = mechanism([free_body("block", mass=m, inertia=m / 6)], parameters=[m, g], gravity=(0, -g))
+    system.add_joint("prismatic", "ground", "block", axis=(np.cos(ALPHA), -np.sin(ALPHA)), name="guide",
+                     friction=kronlag.Friction(kinetic=kinetic, static=static, law="exact"))
+    return system
+
+
+INCLINE_FILE = """
+name = "incline"
+coordinates = ["x", "y", "th"]
+gravity = [0, "-g"]
+
+[parameters]
+m = {value = 2.0, unit = "kg"}
+g = {value = 9.81, unit = "m/s^2"}
+alpha = {value = 0.5, unit = "rad"}
+mu_s = STATIC
+mu_k = KINETIC
+I = {value = 0.333, unit = "kg*m^2"}
+
+[[bodies]]
+name = "block"
+type = "planar"
+mass = "m"
+inertia = "I"
+position = ["x", "y"]
+angle = "th"
+
+[[joints]]
+name = "guide"
+type = "prismatic"
+body_a = "ground"
+body_b = "block"
+axis = ["cos(alpha)", "-sin(alpha)"]
+friction = {law = "exact", static = "mu_s", kinetic = "mu_k"}
+"""
+
+
+def _incline(static: float, kinetic: float, source: str, tmp_path=None):
+    """The block on the incline (axis down the slope), from the API with the backend ``source`` or from a
+    model file (``source == "file"``)."""
+    if source == "file":
+        path = tmp_path / "incline.toml"
+        path.write_text(INCLINE_FILE.replace("STATIC", repr(static)).replace("KINETIC", repr(kinetic)))
+        model_file = kronlag.load_model(path)
+        return kronlag.derive(model_file.system).numeric(model_file.numeric_values())
+    return kronlag.derive(_incline_system(static, kinetic)).numeric({"m": MASS, "g": G}, backend=source)
+
+
+SOURCES = [*_backends(), "file"]
+DOWN = np.array([np.cos(ALPHA), -np.sin(ALPHA)])
+
+
+def _run(model, v0: float, t_end: float):
+    trajectory = kronlag.simulate(model, (0, t_end), np.zeros(3), [*(v0 * DOWN), 0.0], rtol=1e-11, atol=1e-12)
+    assert trajectory.success, trajectory.message
+    return trajectory, trajectory.q[:, :2] @ DOWN
+
+
+def _stiction_events(trajectory) -> list[StictionEvent]:
+    return [event for event in trajectory.events if isinstance(event, StictionEvent)]
+
+
+@pytest.mark.parametrize("source", SOURCES)
+def test_block_below_the_friction_angle_sticks_exactly(source, tmp_path):
+    """tan(alpha) <= mu_s from rest: held from t0 (event 'stick'), position constant, friction force
+    m g sin(alpha) (the holding row's multiplier) and normal load m g cos(alpha)."""
+    model = _incline(0.6, 0.4, source, tmp_path)
+    trajectory, distance = _run(model, 0.0, 2.0)
+    events = _stiction_events(trajectory)
+    assert [(event.kind, event.t) for event in events] == [("stick", 0.0)]
+    np.testing.assert_allclose(distance, 0.0, atol=1e-12)
+    np.testing.assert_allclose(trajectory.q[:, 2], 0.0, atol=1e-12)
+    columns = trajectory.columns()
+    np.testing.assert_allclose(columns["guide.friction"], MASS * G * np.sin(ALPHA), rtol=1e-12)
+    np.testing.assert_allclose(columns["guide.normal_load"], MASS * G * np.cos(ALPHA), rtol=1e-12)
+    np.testing.assert_allclose(trajectory.friction_work, 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("source", SOURCES)
+def test_block_above_the_friction_angle_slips_and_slides_by_the_closed_form(source, tmp_path):
+    """tan(alpha) > mu_s from rest: slips at t0 (event 'slip' down the slope) and slides with
+    a = g (sin(alpha) - mu_k cos(alpha)); the energy lost is the friction work."""
+    model = _incline(0.5, 0.4, source, tmp_path)
+    trajectory, distance = _run(model, 0.0, 1.5)
+    events = _stiction_events(trajectory)
+    assert [(event.kind, event.t) for event in events] == [("slip", 0.0)] and events[0].force > 0
+    acceleration = G * (np.sin(ALPHA) - 0.4 * np.cos(ALPHA))
+    np.testing.assert_allclose(distance, acceleration * trajectory.t ** 2 / 2, rtol=1e-9, atol=1e-12)
+    columns = trajectory.columns()
+    np.testing.assert_allclose(columns["guide.friction"][1:], 0.4 * MASS * G * np.cos(ALPHA), rtol=1e-10)
+    lost = trajectory.total_energy[0] - trajectory.total_energy
+    np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("source", SOURCES)
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+def test_pushed_block_stops_at_the_closed_form_time_and_distance_and_stays(source, direction, tmp_path):
+    """Pushed at v0 down (mu_k cos(alpha) > sin(alpha)) or up the slope: decelerates at
+    g (mu_k cos(alpha) -+ sin(alpha)), stops at t = v0 / d, s = v0^2 / (2 d) (event 'stick' there, located
+    by root finding), then stays (friction m g sin(alpha) <= mu_s m g cos(alpha)); energy lost = friction work."""
+    model = _incline(0.7, 0.6, source, tmp_path)
+    v0 = 1.0 * direction
+    trajectory, distance = _run(model, v0, 4.0)
+    deceleration = G * (0.6 * np.cos(ALPHA) - direction * np.sin(ALPHA))
+    stop_time, stop_distance = abs(v0) / deceleration, direction * v0 ** 2 / (2 * deceleration)
+    events = _stiction_events(trajectory)
+    assert [event.kind for event in events] == ["stick"]
+    assert abs(events[0].t - stop_time) <= 1e-9 * stop_time
+    np.testing.assert_allclose(distance[trajectory.t >= events[0].t], stop_distance, rtol=1e-9)
+    # the stop is a sample twice: the sliding segment's end, then the held one's start
+    sliding = np.arange(len(trajectory.t)) <= np.argmax(trajectory.t >= events[0].t)
+    np.testing.assert_allclose(distance[sliding], v0 * trajectory.t[sliding]
+                               - direction * deceleration * trajectory.t[sliding] ** 2 / 2, rtol=1e-9, atol=1e-12)
+    columns = trajectory.columns()
+    np.testing.assert_allclose(columns["guide.friction"][~sliding], MASS * G * np.sin(ALPHA), rtol=1e-9)
+    lost = trajectory.total_energy[0] - trajectory.total_energy
+    np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)
+
+
+# -- a Coulomb-damped pendulum -----------------------------------------------------------------------
+
+PENDULUM_FILE = """
+name = "pendulum"
+coordinates = ["x", "y", "th"]
+gravity = [0, "-g"]
+
+[parameters]
+m = {value = 2.0, unit = "kg"}
+L = {value = 0.9, unit = "m"}
+g = {value = 9.81, unit = "m/s^2"}
+mu = 0.1
+r = {value = 0.01, unit = "m"}
+
+[[bodies]]
+name = "bar"
+type = "planar"
+mass = "m"
+inertia = "m*L**2/12"
+position = ["x", "y"]
+angle = "th"
+
+[[joints]]
+name = "pivot"
+type = "revolute"
+body_a = "ground"
+body_b = "bar"
+at_b = ["-L/2", 0]
+friction = {law = "exact", kinetic = "mu", radius = "r"}
+"""
+
+MU, RADIUS, LENGTH = 0.1, 0.01, 0.9
+
+
+def _pendulum(source: str, tmp_path):
+    if source == "file":
+        path = tmp_path / "pendulum.toml"
+        path.write_text(PENDULUM_FILE)
+        model_file = kronlag.load_model(path)
+        return kronlag.derive(model_file.system).numeric(model_file.numeric_values())
+    m, L, g, mu, r = sp.symbols("m L g mu r")
+    system = mechanism([free_body("bar", mass=m, inertia=m * L ** 2 / 12)], parameters=[m, L, g, mu, r],
+                       gravity=(0, -g))
+    system.add_joint("revolute", "ground", "bar", at_b=(-L / 2, 0), name="pivot",
+                     friction=kronlag.Friction(kinetic=mu, radius=r, law="exact"))
+    return kronlag.derive(system).numeric({"m": MASS, "L": LENGTH, "g": G, "mu": MU, "r": RADIUS}, backend=source)
+
+
+def _swing(model, angle: float, t_end: float):
+    """Released at rest ``angle`` off the downward vertical."""
+    q, qd = model.assemble([0, 0, angle - np.pi / 2], fixed={model.coordinate_names[2]: angle - np.pi / 2})
+    # steps of at most 0.02 s: the energy balance's quadrature between the outputs (O(h^5)) below 1e-8
+    trajectory = kronlag.simulate(model, (0, t_end), q, qd, rtol=1e-11, atol=1e-12, max_step=0.02)
+    assert trajectory.success, trajectory.message
+    return trajectory
+
+
+@pytest.mark.parametrize("source", [pytest.param(source, marks=pytest.mark.slow) if source == "python" else source
+                                    for source in SOURCES])
+def test_coulomb_damped_pendulum_decays_by_the_closed_form_and_comes_to_rest(source, tmp_path):
+    """I_O th'' = -m g l_c sin(th) - tau_f sign(th'), tau_f = mu r N, N = m g (1 + O(th^2)): each half swing
+    takes 2 mu r / l_c off the amplitude (turning points: the 'reverse' events, located by root finding);
+    the bar sticks at the first turning point where m g l_c |sin(th)| <= mu r N = mu r m g (at rest N = m g
+    exactly), and stays there.  Energy lost = friction work to 1e-8."""
+    model = _pendulum(source, tmp_path)
+    start, half = 0.04, LENGTH / 2
+    decrement = 2 * MU * RADIUS / half
+    trajectory = _swing(model, start, 10.0)
+    events = _stiction_events(trajectory)
+    assert events[0].kind == "slip" and events[0].t == 0.0
+    turning = [event for event in events[1:] if event.kind == "reverse"]
+    amplitudes = np.array([start] + [abs(event.q[2] + np.pi / 2) for event in turning])
+    np.testing.assert_allclose(-np.diff(amplitudes), decrement, rtol=5e-3)
+    assert events[-1].kind == "stick"
+    rest = events[-1].q[2] + np.pi / 2
+    assert abs(np.sin(rest)) <= MU * RADIUS / half < abs(np.sin(amplitudes[-1]))
+    # closed form (linear): the amplitudes start - k * decrement until the first one <= mu r / l_c
+    predicted = start - decrement * np.arange(len(amplitudes) + 1)
+    assert len(amplitudes) == np.argmax(predicted <= MU * RADIUS / half)
+    np.testing.assert_allclose(abs(rest), predicted[len(amplitudes)], rtol=0, atol=1e-2 * decrement)
+    after = trajectory.t >= events[-1].t
+    np.testing.assert_allclose(trajectory.q[after, 2] + np.pi / 2, rest, atol=1e-12)
+    lost = trajectory.total_energy[0] - trajectory.total_energy
+    np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)
+
+
+def test_methods_without_exact_stiction_refuse_it():
+    model = _incline(0.6, 0.4, "python")
+    with pytest.raises(kronlag.InputError, match="does not support exact stiction"):
+        kronlag.simulate(model, (0, 1), np.zeros(3), np.zeros(3), method="ggl")
+
+
+def test_exact_law_is_written_to_model_files_and_read_back(tmp_path):
+    from kronlag.model.modelfile.writer import to_toml
+
+    path = tmp_path / "incline.toml"
+    path.write_text(INCLINE_FILE.replace("STATIC", "0.6").replace("KINETIC", "0.4"))
+    (tmp_path / "again.toml").write_text(to_toml(kronlag.load_model(path)))
+    friction = kronlag.load_model(tmp_path / "again.toml").system.joints[0].friction
+    assert friction.law == "exact" and str(friction.static) == "mu_s" and str(friction.kinetic) == "mu_k"
+
+
+def test_four_bar_with_exact_friction_in_every_pin_rubs_against_every_rate(tmp_path):
+    """The four-bar of examples/four_bar_friction.toml with the exact law in its four pins: the pins'
+    relative rotations reverse while the linkage moves (kinematic dead points: 'reverse' events, not
+    stops) and the whole linkage reverses at once (redundant holds); each joint's friction opposes its
+    rate at every output (friction power <= 0) and the energy lost is the friction work (to 1e-8 J: the
+    power's jumps at the events are integrated from each segment's side)."""
+    from kronlag.app.workflows import initial_state, numeric_model
+
+    text = Path("examples/four_bar_friction.toml").read_text()
+    text = "\n".join(line.split(", smoothing_velocity")[0] + ', law = "exact"}' if line.startswith("friction =")
+                     else line for line in text.splitlines())
+    path = tmp_path / "four_bar_exact.toml"
+    path.write_text(text)
+    model_file = kronlag.load_model(path, apply_drives=False)
+    model = numeric_model(model_file)
+    q0, qd0 = initial_state(model_file, model)
+    with pytest.warns(kronlag.RedundantConstraintsWarning):  # the linkage stopping in all its pins
+        trajectory = kronlag.simulate(model, (0, 2.0), q0, qd0, rtol=1e-10, atol=1e-12)
+    assert trajectory.success, trajectory.message
+    kinds = {event.kind for event in _stiction_events(trajectory)}
+    assert "reverse" in kinds
+    columns = trajectory.columns()
+    assert np.max(columns["friction_power"]) <= 1e-9
+    lost = trajectory.total_energy[0] - trajectory.total_energy
+    assert lost[-1] > 2.0  # a real loss (2.74 J)
+    np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)
