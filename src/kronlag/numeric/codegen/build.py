@@ -103,14 +103,21 @@ _Candidate = tuple[str, tuple[str, ...] | None, str]
 
 
 def _candidates() -> tuple[_Candidate, ...]:
-    """The compilers in the order they are tried (:func:`c_compiler`)."""
+    """The compilers in the order they are tried (:func:`c_compiler`), for the current ``$CC`` and ``$PATH``."""
+    return _candidates_for(os.environ.get("CC") or "", os.environ.get("PATH") or "")
+
+
+@lru_cache(maxsize=8)
+def _candidates_for(cc_variable: str, path_variable: str) -> tuple[_Candidate, ...]:
+    """:func:`_candidates` for these values of ``$CC`` and ``$PATH`` (searched once: a simulation asks for the
+    compiler at every segment, and ``shutil.which`` costs about a millisecond)."""
     try:
-        cc = shlex.split(os.environ.get("CC") or "")
+        cc = shlex.split(cc_variable)
     except ValueError:  # an unbalanced quote: taken as one word, not found
-        cc = [os.environ["CC"]]
-    programs = [("$CC", cc, f"$CC={os.environ['CC']}")] if cc else []
+        cc = [cc_variable]
+    programs = [("$CC", cc, f"$CC={cc_variable}")] if cc else []
     programs += [(name, [name], name) for name in ("gcc", "cc")]
-    found = [(name, shutil.which(words[0]), words[1:], label) for name, words, label in programs]
+    found = [(name, shutil.which(words[0], path=path_variable or None), words[1:], label) for name, words, label in programs]
     candidates = tuple((name, (path, *arguments) if path else None, label) for name, path, arguments, label in found)
     return candidates + ((_ZIG, _ziglang_command(), "the ziglang package"),)
 
