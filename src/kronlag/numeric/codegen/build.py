@@ -452,7 +452,8 @@ def _compile_parts(compiler: CCompiler, levels: list[tuple[str, ...]], source_pa
     # part 0 (the hand-written C, and the library's key) directly; the kernel parts preprocessed first
     inputs: list[tuple[tuple[str, ...], Path, Path, Path | None]] = [((*levels[0], *defines[0]), source_path,
                                                                       objects[0], None)]
-    preprocessing = [(i, work / f"part{i}.i") for i in range(1, parts)]
+    # named .c, not .i: zig cc (clang 22) refuses its own -mcpu flag on .i inputs
+    preprocessing = [(i, work / f"part{i}_preprocessed.c") for i in range(1, parts)]
     try:
         steps = [subprocess.Popen([*compiler.command, *levels[i], *defines[i], *_CFLAGS, *compiler.flags, "-E", "-P",
                                    "-o", str(path), str(source_path)],
