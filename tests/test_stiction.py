@@ -273,3 +273,17 @@ def test_four_bar_with_exact_friction_in_every_pin_rubs_against_every_rate(tmp_p
     lost = trajectory.total_energy[0] - trajectory.total_energy
     assert lost[-1] > 2.0  # a real loss (2.74 J)
     np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)
+
+
+def test_a_stop_on_a_joint_with_exact_friction_is_refused_where_the_load_division_is_indeterminate():
+    """The block slides down the incline (tan alpha > mu_s) onto a stop across its guide (e = 0): resting on
+    the stop, its guide's friction and the stop's contact force share one motion and any division of the
+    load between them is as good as another.  The run stops there with the joint, the limit, t and q named
+    (before, it went on with a minimum-norm division whose friction was 70 times r mu_s N, no slip)."""
+    system = _incline_system(static=0.3, kinetic=0.2)
+    x, y = system.coordinates[:2]
+    system.add_limit(x * np.cos(ALPHA) - y * np.sin(ALPHA), upper=0.05, restitution=0, name="stop")
+    model = kronlag.derive(system).numeric({"m": MASS, "g": G})
+    with pytest.raises(kronlag.NumericalError, match=r"exact stiction at t = .*q = .*the motion of joint 'guide' "
+                                                      r"is stopped by the contact of 'stop upper'.*law='smooth'"):
+        kronlag.simulate(model, (0, 1.0), np.zeros(3), np.zeros(3))

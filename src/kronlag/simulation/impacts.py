@@ -44,7 +44,7 @@ from ..symbolic.derivation import derive
 from .controllers import ControlledModel, solve_sampled
 from .problem import MultibodyProblem, Solution, Solver, derived_shapes
 from .stepping import stopped_text
-from .stiction import held_forces, start_modes, stiction_model, transition
+from .stiction import check_not_stopped_by_contacts, held_forces, start_modes, stiction_model, transition
 from .trajectory import LimitEvent, Result
 from .watch import LimitWatch
 
@@ -168,6 +168,9 @@ class _LimitRun:
         steps = nfev = njev = 0
         same_time, last_t = 0, None
         while True:
+            if self.stiction and self.active:
+                check_not_stopped_by_contacts(self.model, contact_model(self.model, self.active), t, y,
+                                              [self.kernels.names[i] for i in self.active])
             variant = contact_model(self.base, self.active)
             watch = LimitWatch(self.kernels, np.array([i not in self.active for i in range(n)]),
                                tuple(range(self.model.r, variant.r)), self.first_step,
