@@ -48,7 +48,7 @@ from ..symbolic.derivation import derive
 from .controllers import ControlledModel
 from .trajectory import StictionEvent
 
-__all__ = ["check_not_stopped_by_contacts", "held_forces", "start_modes", "stiction_model", "transition"]
+__all__ = ["after_impulse", "check_not_stopped_by_contacts", "held_forces", "start_modes", "stiction_model", "transition"]
 
 _STICTION_EQUATIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _STICTION_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -201,6 +201,30 @@ def transition(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tup
         events.append(StictionEvent(t=t, joint=names[j], kind=kind, q=y[:m].copy(), force=force,
                                     threshold=threshold))
     return tuple(new), events
+
+
+def after_impulse(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[int, ...], t: float,
+                  y: np.ndarray, names: list[str], rest: float) -> tuple[tuple[int, ...], list[StictionEvent]]:
+    """The modes after an impulse (an impact) changed the rates at ``(t, y)``, and the events: a sliding
+    joint whose rate now points against its direction reverses (its watched ``d v`` would start below zero
+    and never cross it: the friction would push the joint along, feeding energy in), and one left at rest
+    is decided as at a stop (:func:`transition`)."""
+    m = len(y) // 2
+    records = friction_records(variant_of(modes), t, y[:m], y[m:])
+    new, events, resting = list(modes), [], []
+    for j, (mode, record) in enumerate(zip(modes, records)):
+        rate = float(record["J"] @ y[m:])
+        if mode not in (1, -1):
+            continue
+        if abs(rate) <= rest:
+            resting.append(j)
+        elif mode * rate < 0:
+            new[j] = -mode
+            events.append(StictionEvent(t=t, joint=names[j], kind="reverse", q=y[:m].copy()))
+    if not resting:
+        return tuple(new), events
+    decided, more = transition(variant_of, tuple(new), resting, t, y, names, rest)
+    return decided, events + more
 
 
 def _multipliers(model: NumericModel, t: float, y: np.ndarray) -> np.ndarray:
