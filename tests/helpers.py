@@ -214,17 +214,21 @@ HEAVY_TOP_PARAMETERS = {"m": 1.0, "l": 0.5, "g": 9.81, "Ixx": 0.1, "Izz": 0.05}
 
 class ParameterModel:
     """Stand-in for :class:`kronlag.numeric.NumericModel` with what the graphics read from it:
-    the system (``equations.system``) and constant parameter values."""
+    the system (``equations.system``), constant parameter values and no applied forces (``f_Q = 0``,
+    so the energy balance's work ``W`` is zero)."""
 
     time_varying = False
 
     def __init__(self, system, parameters: dict[str, float]):
-        self.equations = SimpleNamespace(system=system)
+        self.equations = SimpleNamespace(system=system, constraints_do_work=False)
         self.parameter_names = tuple(parameter.name for parameter in system.parameters)
         self._values = np.array([parameters[name] for name in self.parameter_names])
 
     def parameter_vector(self, t: float = 0.0) -> np.ndarray:
         return self._values.copy()
+
+    def f_Q(self, q: np.ndarray, qd: np.ndarray, t: float = 0.0) -> np.ndarray:
+        return np.zeros(len(q))
 
 
 def four_bar_joints(q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -475,3 +475,14 @@ def test_inverse_five_bar_reports_the_motor_torques_and_joint_forces(capsys, tmp
     assert abs(data["force_theta1"][0]) > 0.1
     assert np.hypot(data["elbow_1Fx"], data["elbow_1Fy"]) == pytest.approx(np.hypot(data["elbow_2Fx"],
                                                                                      data["elbow_2Fy"]))
+
+
+def test_simulate_reports_the_method_intervals_of_redundant_constraints(capsys):
+    """Bricard's mechanism has a redundant constraint: the summary says which integrator ran and that
+    the multipliers are the minimum-norm ones; a plain compiled run prints no interval line."""
+    with pytest.warns(kronlag.RedundantConstraintsWarning):
+        code, out, _ = run(capsys, "simulate", "bricard", "--t-end", "0.2")
+    assert code == 0
+    assert re.search(r"^  compiled from t = 0 to 0\.2 \(\d+ steps\): redundant constraints .*minimum-norm", out, re.M)
+    code, out, _ = run(capsys, "simulate", "four_bar", "--t-end", "0.2", "--method", "compiled")
+    assert code == 0 and " from t = " not in out

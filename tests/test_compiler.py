@@ -50,8 +50,10 @@ np.savez(sys.argv[1], compiler=codegen.c_compiler().name, qdd=qdd,
 def fresh_choice():
     """Each test sees the choice made and reported anew (each compiler is still probed once)."""
     codegen.build._choose.cache_clear()
+    codegen.build._candidates_for.cache_clear()
     yield
     codegen.build._choose.cache_clear()
+    codegen.build._candidates_for.cache_clear()
 
 
 def run_four_bar(tmp_path: Path, name: str, environment: dict[str, str]) -> tuple[dict, str]:

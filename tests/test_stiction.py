@@ -3,6 +3,7 @@ API and model files, on the default method with friction (compiled CVODE) and th
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -273,3 +274,40 @@ def test_four_bar_with_exact_friction_in_every_pin_rubs_against_every_rate(tmp_p
     lost = trajectory.total_energy[0] - trajectory.total_energy
     assert lost[-1] > 2.0  # a real loss (2.74 J)
     np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)
+
+
+def test_a_stop_on_a_joint_with_exact_friction_is_refused_where_the_load_division_is_indeterminate():
+    """The block slides down the incline (tan alpha > mu_s) onto a stop across its guide (e = 0): resting on
+    the stop, its guide's friction and the stop's contact force share one motion and any division of the
+    load between them is as good as another.  The run stops there with the joint, the limit, t and q named
+    (before, it went on with a minimum-norm division whose friction was 70 times r mu_s N, no slip)."""
+    system = _incline_system(static=0.3, kinetic=0.2)
+    x, y = system.coordinates[:2]
+    system.add_limit(x * np.cos(ALPHA) - y * np.sin(ALPHA), upper=0.05, restitution=0, name="stop")
+    model = kronlag.derive(system).numeric({"m": MASS, "g": G})
+    with pytest.raises(kronlag.NumericalError, match=r"exact stiction at t = .*q = .*the motion of joint 'guide' "
+                                                      r"is stopped by the contact of 'stop upper'.*law='smooth'"):
+        kronlag.simulate(model, (0, 1.0), np.zeros(3), np.zeros(3))
+
+
+def test_an_impact_that_turns_a_sliding_joint_reverses_its_friction():
+    """The pendulum with exact pin friction swings onto a stop at its own angle (e = 0.6): the impulse turns
+    the pin's rate, and its friction must turn with it (the watched d v starts below zero, so no root
+    would ever say so: the friction would push the bar along, feeding energy in).  The energy lost is the
+    friction work plus what the impacts take, 1/2 I_O (v-^2 - v+^2) with the gap speeds of the events."""
+    model = _pendulum("c" if "c" in _backends() else "python", None)
+    system = model.equations.system
+    limited = copy.copy(system)
+    limited.limits = list(system.limits)
+    limited.add_limit(system.coordinates[2] + np.pi / 2, upper=0.03, restitution=0.6, name="stop")
+    model = kronlag.derive(limited).numeric({"m": MASS, "L": LENGTH, "g": G, "mu": MU, "r": RADIUS})
+    trajectory = _swing(model, -0.04, 1.5)
+    impacts = [event for event in trajectory.events if getattr(event, "kind", "") == "impact"]
+    assert impacts, "the bar must reach the stop"
+    turned = [event for event in _stiction_events(trajectory) if event.kind == "reverse"
+              and any(event.t == impact.t for impact in impacts)]
+    assert turned, "the impact must reverse the pin's friction"
+    inertia = MASS * LENGTH ** 2 / 3
+    taken = sum(0.5 * inertia * (event.speed_before ** 2 - event.speed_after ** 2) for event in impacts)
+    lost = trajectory.total_energy[0] - trajectory.total_energy[-1]
+    np.testing.assert_allclose(lost, -trajectory.friction_work[-1] + taken, rtol=0, atol=1e-7)

@@ -27,7 +27,7 @@ from ..model.system import drive_name
 from ..numeric.tolerances import matrix_rank
 from ..simulation.controllers import file_controller
 from ..simulation.simulate import simulate
-from ..simulation.trajectory import LimitEvent
+from ..simulation.trajectory import LimitEvent, StictionEvent
 from ..studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
 from ..symbolic.derivation import derive
 from ..symbolic.equations import Equations
@@ -292,6 +292,12 @@ class SimulationSummary:
     limit_events : tuple of (str, int)
         The number of limit events by kind (``"impact"``, ``"contact"``, ``"release"``), for a model
         with limits.
+    stiction_events : tuple of (str, int)
+        The number of stiction events by kind (``"stick"``, ``"slip"``, ``"reverse"``), for a model
+        with exact joint friction.
+    intervals : tuple of str
+        Which integrator ran where and why (:attr:`Trajectory.intervals`), when that says more than
+        the method's name (the switching method; redundant constraints).
     """
 
     success: bool
@@ -308,6 +314,8 @@ class SimulationSummary:
     work: float = 0.0
     largest_reactions: tuple[tuple[str, float], ...] = ()
     limit_events: tuple[tuple[str, int], ...] = ()
+    stiction_events: tuple[tuple[str, int], ...] = ()
+    intervals: tuple[str, ...] = ()
 
     def report(self) -> str:
         """A few lines of text for people."""
@@ -322,6 +330,9 @@ class SimulationSummary:
         if self.limit_events:  # impacts lose energy: the energy drift above includes it
             lines.append("limit events: " + ", ".join(f"{count} {kind}" for kind, count in self.limit_events)
                          + " (the energy drift includes what the impacts dissipate)")
+        if self.stiction_events:
+            lines.append("stiction events: " + ", ".join(f"{count} {kind}" for kind, count in self.stiction_events))
+        lines += [f"  {interval}" for interval in self.intervals]
         if self.largest_reactions:
             lines.append("max joint force |F|: " + ", ".join(f"{name} {force:.5g}"
                                                              for name, force in self.largest_reactions))
@@ -347,7 +358,8 @@ def summarize(trajectory: Trajectory) -> SimulationSummary:
         work=float(work[-1]) if work.size else 0.0,
         largest_reactions=tuple((joint.name, _largest(np.linalg.norm(trajectory.reaction(joint.name).force, axis=1)))
                                 for joint in trajectory.model.equations.system.joints) if len(trajectory.t) else (),
-        limit_events=_limit_events(trajectory))
+        limit_events=_limit_events(trajectory), stiction_events=_stiction_events(trajectory),
+        intervals=_intervals(trajectory))
 
 
 def _limit_events(trajectory: Trajectory) -> tuple[tuple[str, int], ...]:
@@ -356,6 +368,20 @@ def _limit_events(trajectory: Trajectory) -> tuple[tuple[str, int], ...]:
         return ()
     kinds = [event.kind for event in trajectory.events if isinstance(event, LimitEvent)]
     return tuple((kind, kinds.count(kind)) for kind in ("impact", "contact", "release"))
+
+
+def _stiction_events(trajectory: Trajectory) -> tuple[tuple[str, int], ...]:
+    """The number of stiction events by kind, if there were any (else empty)."""
+    kinds = [event.kind for event in trajectory.events if isinstance(event, StictionEvent)]
+    return tuple((kind, kinds.count(kind)) for kind in ("stick", "slip", "reverse")) if kinds else ()
+
+
+def _intervals(trajectory: Trajectory) -> tuple[str, ...]:
+    """The method intervals as text, unless the run is one interval of the method asked for."""
+    intervals = trajectory.intervals
+    if len(intervals) == 1 and intervals[0].method == trajectory.method:
+        return ()
+    return tuple(str(interval) for interval in intervals)
 
 
 # -- inverse dynamics -----------------------------------------------------------------

@@ -218,7 +218,8 @@ class ExpressionConverter:
             return se.Piecewise(*zip(args[::2], args[1::2]))
         if isinstance(expr, se.FunctionSymbol):
             raise NotImplementedError(f"cannot generate code for the undefined function {expr}")
-        return expr.func(*args)
+        # SymEngine's relationals and boolean functions (a Piecewise's conditions) have no .func
+        return (getattr(expr, "func", None) or type(expr))(*args)
 
     def native_matrix(self, matrix: se.DenseMatrix, name: str = "matrix") -> list[list[se.Basic]]:
         """The entries of the SymEngine ``matrix`` (called ``name`` in errors) converted by :meth:`native`."""

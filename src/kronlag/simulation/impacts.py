@@ -44,7 +44,7 @@ from ..symbolic.derivation import derive
 from .controllers import ControlledModel, solve_sampled
 from .problem import MultibodyProblem, Solution, Solver, derived_shapes
 from .stepping import stopped_text
-from .stiction import held_forces, start_modes, stiction_model, transition
+from .stiction import after_impulse, check_not_stopped_by_contacts, held_forces, start_modes, stiction_model, transition
 from .trajectory import LimitEvent, Result
 from .watch import LimitWatch
 
@@ -168,6 +168,9 @@ class _LimitRun:
         steps = nfev = njev = 0
         same_time, last_t = 0, None
         while True:
+            if self.stiction and self.active:
+                check_not_stopped_by_contacts(self.model, contact_model(self.model, self.active), t, y,
+                                              [self.kernels.names[i] for i in self.active])
             variant = contact_model(self.base, self.active)
             watch = LimitWatch(self.kernels, np.array([i not in self.active for i in range(n)]),
                                tuple(range(self.model.r, variant.r)), self.first_step,
@@ -298,6 +301,10 @@ class _LimitRun:
                           f"{RESTING_GAP:g} atol" if speed < 0 else "on the stop and pressed against it")
                 self.events.append(LimitEvent(t=t, side=self.kernels.names[i], kind="contact", q=q.copy(),
                                               force=forces[i], reason=reason))
+        if self.stiction:  # the impulse may have turned a sliding joint's rate
+            self.modes, events = after_impulse(self._variant_of, self.modes, t, np.concatenate([q, qd_after]),
+                                               self.friction_names, AT_REST * self.options.atol)
+            self.events += events
         return self._project(t, np.concatenate([q, qd_after]))
 
     def _stiction(self, t: float, y: np.ndarray, joints: list[int]) -> np.ndarray:

@@ -41,13 +41,14 @@ from ..model.friction import (
     stick_constraint_name,
 )
 from ..numeric.friction import friction_joints, friction_records, sticking_limit
+from ..core.errors import NumericalError
 from ..numeric.numeric_model import NumericModel
 from ..numeric.tolerances import AT_REST, matrix_rank
 from ..symbolic.derivation import derive
 from .controllers import ControlledModel
 from .trajectory import StictionEvent
 
-__all__ = ["held_forces", "start_modes", "stiction_model", "transition"]
+__all__ = ["after_impulse", "check_not_stopped_by_contacts", "held_forces", "start_modes", "stiction_model", "transition"]
 
 _STICTION_EQUATIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _STICTION_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -116,6 +117,39 @@ def _passing(model: NumericModel, stopped: list[int], t: float, y: np.ndarray) -
     return [j for j in stopped if matrix_rank(np.vstack([rows, records[j]["J"][None, :]]), model.rank_rtol) == rank]
 
 
+def _dependent(rows: np.ndarray, row: np.ndarray, rank_rtol: float) -> bool:
+    """Whether ``row`` is a combination of ``rows`` (the one rank policy)."""
+    rank = matrix_rank(rows, rank_rtol) if len(rows) else 0
+    return matrix_rank(np.vstack([rows, row[None, :]]), rank_rtol) == rank
+
+
+def check_not_stopped_by_contacts(free: NumericModel, touching: NumericModel, t: float, y: np.ndarray,
+                                  contacts: list[str]) -> None:
+    """NumericalError when the rate of a joint with exact friction is free in ``free`` (the model without
+    contacts) but held at zero by the limit ``contacts`` held in ``touching``: the joint's friction and the
+    contact forces then share one direction of motion, and how the load divides between them is
+    statically indeterminate.  kronlag does not pick a division (a minimum-norm one can exceed ``r mu_s
+    N`` by orders of magnitude without a slip): it stops and says so."""
+    m = free.m
+    q = y[:m]
+
+    def rows(model: NumericModel) -> np.ndarray:
+        return np.vstack([model.Phi_q(q, t).reshape(-1, m), model.A(q, t).reshape(-1, m)])
+
+    free_rows, touching_rows = rows(free), rows(touching)
+    joints = friction_joints(free.equations.system)
+    for joint, record in zip(joints, friction_records(free, t, q, y[m:])):
+        if joint.friction.law == "smooth":
+            continue
+        J = np.asarray(record["J"], dtype=float)
+        if _dependent(touching_rows, J, free.rank_rtol) and not _dependent(free_rows, J, free.rank_rtol):
+            raise NumericalError(
+                f"exact stiction at t = {t:.9g}, q = {np.array2string(q, precision=6)}: the motion of joint "
+                f"{joint.name!r} is stopped by the contact of {', '.join(map(repr, contacts))}, so its friction "
+                "and the contact force are statically indeterminate there; kronlag does not divide the load "
+                "between them: give this joint Friction(law='smooth'), or put the limit on another motion")
+
+
 def _rate_changes(model: NumericModel, t: float, y: np.ndarray) -> np.ndarray:
     """``dv/dt`` of every joint with friction at ``(t, y)`` in the segment model ``model``: the rate one short
     step along the motion (``v`` is zero where this is asked)."""
@@ -167,6 +201,30 @@ def transition(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tup
         events.append(StictionEvent(t=t, joint=names[j], kind=kind, q=y[:m].copy(), force=force,
                                     threshold=threshold))
     return tuple(new), events
+
+
+def after_impulse(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[int, ...], t: float,
+                  y: np.ndarray, names: list[str], rest: float) -> tuple[tuple[int, ...], list[StictionEvent]]:
+    """The modes after an impulse (an impact) changed the rates at ``(t, y)``, and the events: a sliding
+    joint whose rate now points against its direction reverses (its watched ``d v`` would start below zero
+    and never cross it: the friction would push the joint along, feeding energy in), and one left at rest
+    is decided as at a stop (:func:`transition`)."""
+    m = len(y) // 2
+    records = friction_records(variant_of(modes), t, y[:m], y[m:])
+    new, events, resting = list(modes), [], []
+    for j, (mode, record) in enumerate(zip(modes, records)):
+        rate = float(record["J"] @ y[m:])
+        if mode not in (1, -1):
+            continue
+        if abs(rate) <= rest:
+            resting.append(j)
+        elif mode * rate < 0:
+            new[j] = -mode
+            events.append(StictionEvent(t=t, joint=names[j], kind="reverse", q=y[:m].copy()))
+    if not resting:
+        return tuple(new), events
+    decided, more = transition(variant_of, tuple(new), resting, t, y, names, rest)
+    return decided, events + more
 
 
 def _multipliers(model: NumericModel, t: float, y: np.ndarray) -> np.ndarray:

@@ -149,19 +149,16 @@ def _energy_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> Non
 
 
 def _energy_drift_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
-    """``E(t) - E(t0)``; with joint friction ``E(t) - E(t0) - W_f(t)`` (its work is energy lost, not drift)."""
-    total = traj.kinetic_energy + traj.potential_energy
-    drift, label = total - total[0], "$E(t) - E(t_0)$"
-    if friction_joints(traj.model.equations.system):
-        drift, label = drift - traj.friction_work, "$E(t) - E(t_0) - W_f(t)$"
-    _plot_series(axes, traj.t, drift[:, None], [label],
+    """``E(t) - E(t0) - W(t)`` (:attr:`Trajectory.energy_balance`): the work ``W`` of the non-conservative
+    forces (friction, dampers, applied forces, a controller's inputs) is energy exchanged, not drift."""
+    _plot_series(axes, traj.t, traj.energy_balance[:, None], ["$E(t) - E(t_0) - W(t)$"],
                  title="Total-energy drift", ylabel=_with_unit(r"$\Delta E$", units.get("energy")))
 
 
 def _friction_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
     """Each joint's friction force or torque (against its rate)."""
     joints = friction_joints(traj.model.equations.system)
-    columns = friction_columns(traj.model, traj.t, traj.q, traj.qd, traj.lam)
+    columns = friction_columns(traj.model, traj.t, traj.q, traj.qd, traj.lam, traj.friction_held)
     _plot_series(axes, traj.t, np.column_stack([columns[f"{joint.name}.friction"] for joint in joints]),
                  [joint.name for joint in joints], title="joint friction (force or torque)",
                  ylabel="friction (N or N*m)" if units.get("energy") == "J" else "friction")

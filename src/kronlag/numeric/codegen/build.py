@@ -103,14 +103,21 @@ _Candidate = tuple[str, tuple[str, ...] | None, str]
 
 
 def _candidates() -> tuple[_Candidate, ...]:
-    """The compilers in the order they are tried (:func:`c_compiler`)."""
+    """The compilers in the order they are tried (:func:`c_compiler`), for the current ``$CC`` and ``$PATH``."""
+    return _candidates_for(os.environ.get("CC") or "", os.environ.get("PATH") or "")
+
+
+@lru_cache(maxsize=8)
+def _candidates_for(cc_variable: str, path_variable: str) -> tuple[_Candidate, ...]:
+    """:func:`_candidates` for these values of ``$CC`` and ``$PATH`` (searched once: a simulation asks for the
+    compiler at every segment, and ``shutil.which`` costs about a millisecond)."""
     try:
-        cc = shlex.split(os.environ.get("CC") or "")
+        cc = shlex.split(cc_variable)
     except ValueError:  # an unbalanced quote: taken as one word, not found
-        cc = [os.environ["CC"]]
-    programs = [("$CC", cc, f"$CC={os.environ['CC']}")] if cc else []
+        cc = [cc_variable]
+    programs = [("$CC", cc, f"$CC={cc_variable}")] if cc else []
     programs += [(name, [name], name) for name in ("gcc", "cc")]
-    found = [(name, shutil.which(words[0]), words[1:], label) for name, words, label in programs]
+    found = [(name, shutil.which(words[0], path=path_variable or None), words[1:], label) for name, words, label in programs]
     candidates = tuple((name, (path, *arguments) if path else None, label) for name, path, arguments, label in found)
     return candidates + ((_ZIG, _ziglang_command(), "the ziglang package"),)
 
@@ -445,7 +452,8 @@ def _compile_parts(compiler: CCompiler, levels: list[tuple[str, ...]], source_pa
     # part 0 (the hand-written C, and the library's key) directly; the kernel parts preprocessed first
     inputs: list[tuple[tuple[str, ...], Path, Path, Path | None]] = [((*levels[0], *defines[0]), source_path,
                                                                       objects[0], None)]
-    preprocessing = [(i, work / f"part{i}.i") for i in range(1, parts)]
+    # named .c, not .i: zig cc (clang 22) refuses its own -mcpu flag on .i inputs
+    preprocessing = [(i, work / f"part{i}_preprocessed.c") for i in range(1, parts)]
     try:
         steps = [subprocess.Popen([*compiler.command, *levels[i], *defines[i], *_CFLAGS, *compiler.flags, "-E", "-P",
                                    "-o", str(path), str(source_path)],
