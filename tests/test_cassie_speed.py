@@ -52,3 +52,16 @@ def test_matrix_product_agrees_with_sympy():
     right = sp.Matrix([[1, 0, 0], [0, sp.cos(q2), -sp.sin(q2)], [0, sp.sin(q2), sp.cos(q2)]])
     for a, b in ((left, right), (right, left), (left, sp.Matrix([q1, 0, q2]))):
         assert sp.simplify(matrix_product(a, b) - a * b) == sp.zeros(a.rows, b.cols)
+
+
+def test_derive_converts_a_deep_shared_expression():
+    q, a = sp.symbols("q a")
+    system = kronlag.System([q], parameters=[a])
+    system.add_body(kronlag.PointMass("tip", mass=1, position=(_shared_chain(60, q, a), 0, 0)))
+    system.add_constraint(_shared_chain(60, q, a) - 1, name="deep")
+    equations = kronlag.derive(system)
+    x0 = {q: 0.3, a: 0.7}
+    depth_value = 0.3
+    for _ in range(60):
+        depth_value = float(sp.sin(depth_value) * 0.7 + sp.cos(depth_value))
+    assert float(equations.Phi[0].subs(x0)) == pytest.approx(depth_value - 1, rel=1e-12)
