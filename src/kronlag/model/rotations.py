@@ -294,10 +294,10 @@ class RotationSequence:
         for k in reversed(range(len(self.factors))):
             axis, angle = self.factors[k]
             if isinstance(axis, str):  # EULER_PARAMETERS: 2 G(e) edot, one term per parameter
-                rates = 2 * tail.T * euler_parameter_rates(*angle)
+                rates = 2 * matrix_product(tail.T, euler_parameter_rates(*angle))
                 result.extend((sp.ImmutableMatrix(rates[:, j]), angle[j]) for j in reversed(range(4)))
             else:
-                result.append((sp.ImmutableMatrix(tail.T * axis), angle))
+                result.append((sp.ImmutableMatrix(matrix_product(tail.T, axis)), angle))
             tail = matrix_product(self._factor_matrix(k), tail)
         return result[::-1]
 
