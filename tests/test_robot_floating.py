@@ -203,8 +203,7 @@ def test_cassie_loops_close_and_its_mobility_is_counted_right():
     close at the reference pose; their constraint ranks are 3, 3 (Achilles rods) and 2, 2 (the planar
     foot four-bars: the left one's out-of-plane row is identically zero and dropped, the right one's is
     planar only to ~7e-8 rad, and the rank policy of kronlag.numeric.tolerances counts it dependent);
-    the mobility 18 = 29 coordinates - 1 normalization - 10, against m - r = 17 (loading takes minutes:
-    the world-frame expressions of its 10-link chains are large)."""
+    the mobility 18 = 29 coordinates - 1 normalization - 10, against m - r = 17."""
     bench = _bench()
     folder = _folder(bench)
     with warnings.catch_warnings():

@@ -15,6 +15,7 @@ import sympy as sp
 
 from ..core.errors import ModelError
 from .inputs import as_scalar
+from .symbols import free_symbols
 
 __all__ = ["Limit", "LimitSide", "make_limit"]
 
@@ -71,7 +72,7 @@ def make_limit(name: str, value, lower, upper, restitution, coordinates) -> Limi
     symbols are checked by :meth:`kronlag.System.add_limit`)."""
     what = f"limit {name!r}"
     expression = as_scalar(value, what)
-    if not expression.free_symbols & set(coordinates):
+    if not free_symbols(expression) & set(coordinates):
         raise ModelError(f"{what} does not depend on any coordinate: {expression}")
     if lower is None and upper is None:
         raise ModelError(f"{what}: give lower=, upper= or both")

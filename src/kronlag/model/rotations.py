@@ -24,6 +24,7 @@ from ..core.kernels import ExpressionFunction
 from .inputs import as_components, as_scalar, as_vector
 
 __all__ = [
+    "matrix_product",
     "elementary_rotation",
     "planar_rotation",
     "axis_angle",
@@ -281,7 +282,7 @@ class RotationSequence:
         """``R`` (3x3): maps body-frame components to the frame the sequence starts in."""
         rotation = sp.eye(3)
         for k in range(len(self.factors)):
-            rotation = rotation * self._factor_matrix(k)
+            rotation = matrix_product(rotation, self._factor_matrix(k))
         return sp.ImmutableMatrix(rotation)
 
     def body_axes(self) -> list[tuple[sp.ImmutableMatrix, sp.Expr]]:
@@ -293,12 +294,25 @@ class RotationSequence:
         for k in reversed(range(len(self.factors))):
             axis, angle = self.factors[k]
             if isinstance(axis, str):  # EULER_PARAMETERS: 2 G(e) edot, one term per parameter
-                rates = 2 * tail.T * euler_parameter_rates(*angle)
+                rates = 2 * matrix_product(tail.T, euler_parameter_rates(*angle))
                 result.extend((sp.ImmutableMatrix(rates[:, j]), angle[j]) for j in reversed(range(4)))
             else:
-                result.append((sp.ImmutableMatrix(tail.T * axis), angle))
-            tail = self._factor_matrix(k) * tail
+                result.append((sp.ImmutableMatrix(matrix_product(tail.T, axis)), angle))
+            tail = matrix_product(self._factor_matrix(k), tail)
         return result[::-1]
+
+
+def matrix_product(left, right) -> sp.Matrix:
+    """``left * right`` for matrices of expressions, skipping the products with an exact zero.
+
+    SymPy's own product asks ``0 * entry`` of every entry (to catch ``0 * oo``), and that
+    assumption query walks the whole entry: on the rotations of a deep kinematic chain it
+    dominates building the model.  Entries here are finite expressions of the coordinates.
+    """
+    def entry(i: int, j: int) -> sp.Expr:
+        return sp.Add(*(left[i, k] * right[k, j] for k in range(left.cols)
+                        if left[i, k] != 0 and right[k, j] != 0))
+    return sp.Matrix(left.rows, right.cols, entry)
 
 
 #: Random points at which a rotation matrix is checked numerically for orthogonality.

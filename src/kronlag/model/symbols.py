@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
+from functools import cache
 
 import sympy as sp
 
 from ..core.errors import InputError, ModelError
 
 __all__ = ["t", "coordinates", "speed_symbol", "acceleration_symbol", "MULTIPLIER_NAME", "check_name",
-           "name_indices"]
+           "name_indices", "free_symbols"]
 
 #: The time symbol; allowed in applied forces and torques and in constraints (drives).
 t = sp.Symbol("t")
@@ -53,6 +54,37 @@ def check_name(name, what: str) -> str:
         raise ModelError(f"a {what} needs a non-empty name, got {name!r}")
     return name
 
+
+@cache
+def _unions_its_arguments(kind: type) -> bool:
+    """Whether ``kind``'s free symbols are just the union of its arguments' (SymPy's default rule);
+    symbols, matrices and binding forms (Derivative, Integral, Lambda, Subs...) have their own."""
+    owner = next(base for base in kind.__mro__ if "free_symbols" in vars(base))
+    return owner is sp.Basic
+
+
+def free_symbols(expression) -> set[sp.Symbol]:
+    """``expression.free_symbols`` (a SymPy expression or matrix), visiting each shared subexpression once.
+
+    SymPy's own ``free_symbols`` re-walks a subexpression every time it is shared, so on the
+    world-frame positions of a deep kinematic chain (each link reusing its parent's pose) its
+    cost doubles with every level; this walk over the expression DAG is linear in its distinct nodes.
+    """
+    found: set[sp.Symbol] = set()
+    seen: set[int] = set()  # node ids: the nodes stay alive inside ``expression`` during the walk
+    pending = [expression]
+    while pending:
+        node = pending.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if isinstance(node, sp.MatrixBase):
+            pending.extend(node)
+        elif _unions_its_arguments(type(node)):
+            pending.extend(node.args)
+        else:
+            found |= node.free_symbols
+    return found
 
 
 def name_indices(keys: Sequence, known: Mapping[str, int], what: str) -> list[int]:

@@ -43,7 +43,7 @@ from .loads import (
     Spring,
 )
 from .structure import describe
-from .symbols import MULTIPLIER_NAME, acceleration_symbol, check_name, speed_symbol, t
+from .symbols import MULTIPLIER_NAME, acceleration_symbol, check_name, free_symbols, speed_symbol, t
 
 if TYPE_CHECKING:
     from .robot_formats.description import RobotDescription
@@ -160,7 +160,7 @@ class System:
             allowed |= set(self.speeds)
         if allow_t:
             allowed.add(t)
-        unknown = sorted(expr.free_symbols - allowed, key=lambda s: s.name)
+        unknown = sorted(free_symbols(expr) - allowed, key=lambda s: s.name)
         if not unknown:
             return
         symbol = unknown[0]
@@ -266,11 +266,11 @@ class System:
         name = name or f"constraint {len(self.constraints) + 1}"
         self._unique(self.constraints, name, "constraint")
         expr = as_scalar(expression, f"constraint {name!r}")
-        if expr.free_symbols & set(self.speeds):
+        if free_symbols(expr) & set(self.speeds):
             raise ModelError(f"constraint {name!r} contains speeds; give a velocity constraint with "
                              "add_nonholonomic_constraint")
         self._check_symbols(expr, f"constraint {name!r}", allow_t=True)
-        if not expr.free_symbols & set(self.coordinates):
+        if not free_symbols(expr) & set(self.coordinates):
             raise ModelError(f"constraint {name!r} does not depend on any coordinate: {expr}")
         self.constraints.append(NamedExpression(name, expr))
 
@@ -338,12 +338,12 @@ class System:
         expr = as_scalar(expression, f"nonholonomic constraint {name!r}")
         self._check_symbols(expr, f"nonholonomic constraint {name!r}", allow_qd=True, allow_t=True)
         speeds = set(self.speeds)
-        if not expr.free_symbols & speeds:
+        if not free_symbols(expr) & speeds:
             raise ModelError(f"nonholonomic constraint {name!r} does not depend on any speed; "
                              "a constraint on q alone is holonomic (add_constraint)")
         for qd in self.speeds:
             coefficient = sp.diff(expr, qd)
-            if coefficient.free_symbols & speeds:
+            if free_symbols(coefficient) & speeds:
                 raise ModelError(f"nonholonomic constraint {name!r} is not linear in the speeds: "
                                  f"its coefficient of {qd} is {coefficient}")
         self.nonholonomic_constraints.append(NamedExpression(name, expr))

@@ -51,9 +51,38 @@ def _se_matrix(matrix: sp.MatrixBase) -> se.DenseMatrix:
     return se.DenseMatrix(matrix.rows, matrix.cols, [_symengine(entry) for entry in matrix])
 
 
+#: SymPy node types rebuilt node by node in SymEngine (their arguments converted first); the other
+#: non-atomic nodes are converted whole.
+_REBUILT = {sp.Add: lambda *args: se.Add(*args), sp.Mul: lambda *args: se.Mul(*args), sp.Pow: se.Pow,
+            **{getattr(sp, name): getattr(se, name) for name in (
+                "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "exp", "log", "sinh", "cosh", "tanh")}}
+
+
 def _symengine(expr: sp.Basic) -> se.Basic:
-    """``expr`` in SymEngine, ``Min``, ``Max`` and ``Heaviside`` as ``Piecewise`` (:func:`piecewise_form`)."""
-    return se.sympify(piecewise_form(expr))
+    """``expr`` in SymEngine, ``Min``, ``Max`` and ``Heaviside`` as ``Piecewise`` (:func:`piecewise_form`).
+
+    Converted over the expression DAG, each shared subexpression once: ``sympify`` (and SymPy's
+    ``has``) walk the tree, exponential in the depth of a chain whose poses reuse their parent's.
+    """
+    converted: dict[int, se.Basic] = {}  # node ids: the nodes stay alive inside ``expr``
+    pending = [expr]
+    while pending:
+        node = pending[-1]
+        if id(node) in converted:
+            pending.pop()
+            continue
+        rebuild = _REBUILT.get(type(node))
+        if rebuild is None:
+            converted[id(node)] = se.sympify(piecewise_form(node))
+            pending.pop()
+            continue
+        missing = [argument for argument in node.args if id(argument) not in converted]
+        if missing:
+            pending.extend(missing)
+            continue
+        converted[id(node)] = rebuild(*(converted[id(argument)] for argument in node.args))
+        pending.pop()
+    return converted[id(expr)]
 
 
 class _SympyConverter:

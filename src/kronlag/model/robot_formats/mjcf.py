@@ -35,6 +35,7 @@ from xml.etree.ElementTree import Element
 import numpy as np
 import sympy as sp
 
+from ...core.kernels import ExpressionFunction
 from ..system import System
 from .description import JointLimits
 from .safe_xml import XmlDocument, numbers, read_xml
@@ -406,9 +407,9 @@ def _frame_of(document: XmlDocument, system: System, element: Element, key: str)
 def _identically_zero(expression: sp.Expr, at: np.ndarray, symbols: list) -> bool:
     """Whether a row is zero at the reference and at random coordinates (then it is zero everywhere,
     but for a set of measure zero that random points do not hit)."""
-    evaluate = sp.lambdify(symbols, expression, "numpy")
-    points = [at, *np.random.default_rng(21).uniform(-np.pi, np.pi, (4, len(symbols)))]
-    return all(abs(float(evaluate(*point))) <= _ZERO_ROW for point in points)
+    evaluate = ExpressionFunction({"row": sp.Matrix([expression])}, [("q", symbols)], name="constraint_row")
+    points = np.vstack([at, np.random.default_rng(21).uniform(-np.pi, np.pi, (4, len(symbols)))])
+    return bool(np.all(np.abs(evaluate.batch(points)["row"]) <= _ZERO_ROW))
 
 
 def add_rows(document: XmlDocument, system: System, element: Element, name: str, rows) -> None:
@@ -436,10 +437,10 @@ def _check_closure(document: XmlDocument, system: System, element: Element, at: 
     expressions = [constraint.expression for constraint in system.constraints]
     if not expressions or set().union(*(e.free_symbols for e in expressions)) - set(symbols):
         return
-    evaluate = sp.lambdify(symbols, expressions, "numpy")
+    evaluate = ExpressionFunction({"rows": sp.Matrix(expressions)}, [("q", symbols)], name="loop_constraints")
 
     def residual(q: np.ndarray) -> np.ndarray:
-        return np.array(evaluate(*q), dtype=float).ravel()
+        return evaluate(q)["rows"].ravel()
 
     q, values = at.astype(float), residual(at.astype(float))
     start = float(np.abs(values).max())

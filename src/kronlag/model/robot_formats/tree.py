@@ -36,8 +36,9 @@ from ...core.errors import InputError, ModelError
 from ..bodies import RigidBody
 from ..frames import GROUND, Frame
 from ..rotations import (EULER_PARAMETERS, MAX_ROTATION_FACTORS, RotationSequence, euler_parameter_constraint,
-                         euler_parameters)
+                         euler_parameters, matrix_product)
 from ..system import System
+from ..symbols import free_symbols
 from .absolute import COORDINATE_CHOICES, absolute_system
 from .description import JointLimits, RobotDescription, RobotFileWarning, RobotJoint, Visual, coordinate_name
 from .meshes import with_mesh_bounds
@@ -162,6 +163,12 @@ def _joint_factors(axis_of_joint: Sequence[float], coordinate: sp.Symbol) -> lis
     return [factor for factor in (*turn, ("z", coordinate), *back) if factor[1] != 0]
 
 
+def _exact(x: float) -> sp.Expr:
+    """``x`` as a SymPy number, an Integer where it is one to rounding: a Float ``0.0`` is not SymPy's
+    zero, and ``0.0 * expr`` keeps (and makes SymPy query the assumptions of) the whole ``expr``."""
+    return sp.Integer(round(x)) if abs(x - round(x)) < 1e-15 else sp.Float(x)
+
+
 def _plane(axis: Sequence[float]) -> tuple[sp.Matrix, sp.Matrix]:
     """Two unit vectors ``u, v`` normal to ``axis`` with ``u x v = axis``: for the axis z, x and y (the
     next principal axes in cyclic order; projected onto the plane for a general axis)."""
@@ -170,8 +177,7 @@ def _plane(axis: Sequence[float]) -> tuple[sp.Matrix, sp.Matrix]:
     u = helper - (helper @ normal) * normal
     u /= np.linalg.norm(u)
     v = np.cross(normal, u)
-    return tuple(sp.Matrix([sp.Integer(round(x)) if abs(x - round(x)) < 1e-15 else sp.Float(x) for x in w])
-                 for w in (u, v))
+    return tuple(sp.Matrix([_exact(x) for x in w]) for w in (u, v))
 
 
 def _moves(factor) -> bool:
@@ -185,22 +191,22 @@ def _step(spec: TreeJoint, coordinates: list[sp.Symbol], origin: sp.Matrix,
     rotation's factors after the joint frame's, and its rotation."""
     kind = spec.kind
     if kind == "prismatic":
-        return origin + rotation * sp.Matrix(spec.axis) * coordinates[0], [], rotation
+        return origin + matrix_product(rotation, sp.Matrix(spec.axis)) * coordinates[0], [], rotation
     if kind in ("floating", "planar"):
         if kind == "floating":
             shift = sp.Matrix(coordinates[:3])
         else:
             u, v = _plane(spec.axis)
             shift = u * coordinates[0] + v * coordinates[1]
-        origin = origin + rotation * shift
+        origin = origin + matrix_product(rotation, shift)
     if kind in ("floating", "ball"):
         e = tuple(coordinates[-4:])
-        return origin, [(EULER_PARAMETERS, e)], rotation * euler_parameters(*e)
+        return origin, [(EULER_PARAMETERS, e)], matrix_product(rotation, euler_parameters(*e))
     step = _joint_factors(spec.axis, coordinates[-1] if kind == "planar" else coordinates[0])
     if kind == "universal":
         assert spec.axis2 is not None  # a reader that makes a universal joint gives its second axis
         step = step + _joint_factors(spec.axis2, coordinates[1])
-    return origin, step, rotation * RotationSequence(step).matrix
+    return origin, step, matrix_product(rotation, RotationSequence(step).matrix)
 
 
 @dataclass
@@ -227,11 +233,11 @@ def _body_rotation(placement: _Placement):
         moved, constant = [], np.eye(3)
         for axis, angle in factors:
             if axis == EULER_PARAMETERS:  # C R(e0, e) = R(e0, C e) C
-                moved.append((axis, (angle[0], *(sp.Matrix(constant) * sp.Matrix(angle[1:])))))
+                moved.append((axis, (angle[0], *(sp.Matrix(3, 3, [_exact(x) for x in constant.flat]) * sp.Matrix(angle[1:])))))
                 continue
             unit = np.array(_PRINCIPAL[axis] if isinstance(axis, str) else axis, dtype=float)
             if angle.free_symbols:
-                moved.append((tuple(sp.Float(x) for x in constant @ unit / np.linalg.norm(constant @ unit)), angle))
+                moved.append((tuple(_exact(x) for x in constant @ unit / np.linalg.norm(constant @ unit)), angle))
             else:
                 constant = constant @ np.array(RotationSequence([(axis, angle)]).matrix, dtype=float)
         factors = moved + _matrix_factors(constant)
@@ -376,8 +382,8 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
         turn = rpy_factors(roll, pitch, yaw)
         factors = _compact(parent.factors + turn)
         turned = RotationSequence(turn).matrix if turn else sp.eye(3)
-        rotation = parent.rotation * turned if turn else parent.rotation
-        origin = parent.origin + parent.rotation * sp.Matrix([x, y, z])
+        rotation = matrix_product(parent.rotation, turned) if turn else parent.rotation
+        origin = parent.origin + matrix_product(parent.rotation, sp.Matrix([x, y, z]))
         points = parent.points + [origin]
         if spec.kind == "fixed":
             in_body = parent.in_body @ transform(spec.origin)
@@ -403,7 +409,7 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
                 raise document.error(links[spec.child], f"is a zero-mass leaf: the joint {spec.name!r} moves nothing "
                                                         "that has mass or inertia (its acceleration is undetermined)")
             continue
-        centre = placement.origin + placement.rotation * sp.Matrix(inertial.centre)
+        centre = placement.origin + matrix_product(placement.rotation, sp.Matrix(inertial.centre))
         centres[spec.child] = centre
         system.add_body(RigidBody(spec.child, mass=sp.Float(inertial.mass), inertia=sp.Matrix(inertial.tensor),
                                   position=centre, rotation=_body_rotation(placement), simplify=False))
@@ -472,7 +478,8 @@ def relative_frames(system: System, first: str, second: str) -> tuple[Frame, Fra
         origin, rotation = sp.zeros(3, 1), sp.eye(3)
         for link in reversed(links[:links.index(ancestor)]):
             step = local[link][1]
-            origin, rotation = origin + rotation * sp.Matrix(step.origin), rotation * sp.Matrix(step.rotation)
+            origin, rotation = (origin + matrix_product(rotation, sp.Matrix(step.origin)),
+                                matrix_product(rotation, sp.Matrix(step.rotation)))
         return Frame(origin, rotation)
 
     return frame(first_path), frame(second_path)
@@ -528,5 +535,5 @@ def _add_drawing(system: System, order: list[TreeJoint], placements: dict[str, _
         start = max((index for index, point in enumerate(points) if id(point) in drawn), default=0)
         line = points[start:]
         drawn.update(id(point) for point in line)
-        if len(line) >= 2 and any(point.free_symbols for point in line):
+        if len(line) >= 2 and any(free_symbols(point) for point in line):
             system.add_drawing_line(line, name=f"{spec.child} branch")
