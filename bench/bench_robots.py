@@ -43,8 +43,6 @@ import numpy as np
 
 import kronlag
 
-from common import Record, add_arguments
-
 #: Issues 19 and 21: load + derive + build at most this (s) per robot; FD at most this fraction of ``aba``.
 TARGET_BUILD_S = 5.0
 TARGET_RATIO = 0.8
@@ -425,6 +423,8 @@ def run_mjcf(name: str, *, quick: bool) -> dict:
 
 
 def main(argv=None) -> int:
+    from common import Record, add_arguments  # here: the tests load this file as a module, without bench/ on the path
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     known = [*ROBOTS, *FLOATING, "cassie", "arm", "four_bar"]
     parser.add_argument("robots", nargs="*", help=f"some of {', '.join(known)} (default: all)")
@@ -470,7 +470,7 @@ def main(argv=None) -> int:
     return 1 if failed else 0
 
 
-def record_row(record: Record, row: dict, *, quick: bool) -> None:
+def record_row(record, row: dict, *, quick: bool) -> None:
     """A row's figures: load + derive + build against its target, FD against the peer (a target against
     Pinocchio's ``aba``; MuJoCo's ``mj_forward`` does more, so its ratio is for information)."""
     record.figure(f"{row['robot']}: load + derive + build", row["load_s"] + row["derive_s"] + row["build_s"],
