@@ -6,6 +6,7 @@ Run by hand (not a pytest test; needs ``pip install pin``)::
 
     python3 bench/bench_arms.py            # UR5 and Panda
     python3 bench/bench_arms.py --quick    # smoke test: 100 times fewer calls
+    python3 bench/bench_arms.py --json -   # also write bench/results/bench_arms.json
 
 The arms are ``kronlag.models.ur5()`` (6 joints, standard DH) and ``panda()`` (7 joints,
 modified DH).  The Pinocchio model is built from the kronlag model's bodies, not from the DH
@@ -40,6 +41,8 @@ import sympy as sp
 
 import kronlag
 from kronlag import models
+
+from common import Record, add_arguments
 
 QUICK = False
 ARMS = ("ur5", "panda")
@@ -156,7 +159,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
     parser.add_argument("--quick", action="store_true", help="smoke test: 100 times fewer calls")
+    add_arguments(parser)
     arguments = parser.parse_args()
+    record = Record("bench_arms", arguments)
     global QUICK
     QUICK = arguments.quick
     print(f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, "
@@ -173,8 +178,13 @@ def main() -> None:
                                          ("kronlag C Cqd", "pinocchio nonLinearEffects", 1.5)):
             ratio = times["ratios"][(label, reference)]
             print(f"  {name:6s} {label[10:]:17s} {ratio:5.2f}  {'ok' if ratio <= target else 'OVER'} (target {target})")
+            record.figure(f"{name}: {label} / {reference}", ratio, unit="x", target=target, better="lower",
+                          detail=f"median of {BLOCKS} interleaved blocks")
+        record.figure(f"{name}: derive + C build (empty cache)", times["build"], unit=" s", target=TARGET_BUILD_S,
+                      better="lower")
     print(f"\ntargets: forward dynamics at most {TARGET_RATIO}x aba and derive + C build at most {TARGET_BUILD_S:.0f} s "
           "(issues 19 and 21); the accessors M, g, Cqd at most 1.5x crba, computeGeneralizedGravity, nonLinearEffects")
+    record.finish()
 
 
 if __name__ == "__main__":

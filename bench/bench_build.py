@@ -6,6 +6,8 @@ Run by hand (not a pytest test)::
     python3 bench/bench_build.py                  # closed_chain(40, "relative") and (100, "absolute")
     python3 bench/bench_build.py --n 12 20        # both conventions at each n
     python3 bench/bench_build.py --n 20 --compare-cse
+    python3 bench/bench_build.py --quick          # smoke test: n = 8, both conventions
+    python3 bench/bench_build.py --json -         # also write bench/results/bench_build.json
 
 What is timed (``time.perf_counter``), each case in a fresh Python process with
 an empty compiled-library cache (``$KRONLAG_CACHE`` set to a new temporary
@@ -37,6 +39,8 @@ import subprocess
 import sys
 import tempfile
 import time
+
+from common import Record, add_arguments
 
 SCRIPT = os.path.abspath(__file__)
 #: Derivation + C build time targets (s) by case; other cases are reported without a target.
@@ -119,12 +123,16 @@ def main() -> None:
                         "default: the target cases")
     parser.add_argument("--compare-cse", action="store_true", help="also time sympy.cse on M")
     parser.add_argument("--case", nargs=2, help=argparse.SUPPRESS)
+    parser.add_argument("--quick", action="store_true", help="smoke test: n = 8, both conventions")
+    add_arguments(parser)
     arguments = parser.parse_args()
     if arguments.case:
         n, angles = int(arguments.case[0]), arguments.case[1]
         print(json.dumps(measure(n, angles, arguments.compare_cse)))
         return
-    cases = ([(n, angles) for n in arguments.n for angles in ("absolute", "relative")] if arguments.n
+    record = Record("bench_build", arguments)
+    sizes = [8] if arguments.quick and not arguments.n else arguments.n
+    cases = ([(n, angles) for n in sizes for angles in ("absolute", "relative")] if sizes
              else list(TARGETS_S))
     print(f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, load average "
           f"{os.getloadavg()[0]:.1f} at the start (a shared machine: other jobs slow the compiler)")
@@ -151,6 +159,14 @@ def main() -> None:
             print(f"  eom.numeric(backend='python')     {r['numeric_python']:7.2f} s  (after derive)")
         if arguments.compare_cse:
             print(f"  cse of M: symengine {r['symengine_cse_M']:.3f} s, sympy {r['sympy_cse_M']:.3f} s")
+        case = f"closed_chain({n}, {angles})"
+        record.figure(f"{case}: derive + C build (empty cache)", r["total"], unit=" s", target=target, better="lower",
+                      detail="fresh process")
+        record.figure(f"{case}: peak memory of derive + build", r["peak_mb"], unit=" MB", target=PEAK_MB_TARGET,
+                      better="lower")
+        record.figure(f"{case}: first simulate after the build", r["first_simulate"], unit=" s",
+                      target=FIRST_SIMULATE_TARGET_S, better="lower")
+    record.finish()
 
 
 if __name__ == "__main__":

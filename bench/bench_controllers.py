@@ -3,7 +3,7 @@
 
 Run by hand (not a pytest test)::
 
-    python3 bench/bench_controllers.py
+    python3 bench/bench_controllers.py [--repeat 5] [--quick] [--json -]   # --quick: best of 2
 
 1. A Python controller called at every evaluation: the LQR state feedback of the file as a Python
    function ``controller(t, q, qd) -> {"u": value}`` against the same law written symbolically into
@@ -34,6 +34,8 @@ import kronlag
 from kronlag.app.workflows import initial_state, numeric_model
 from kronlag.simulation.controllers import file_controller
 
+from common import Record, add_arguments
+
 MODEL_FILE = Path(__file__).resolve().parents[1] / "examples" / "cart_pole.toml"
 
 
@@ -61,7 +63,11 @@ def symbolic_model(file: kronlag.model.modelfile.ModelFile) -> kronlag.NumericMo
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
-    repeat = parser.parse_args().repeat
+    parser.add_argument("--quick", action="store_true", help="best of 2 (smoke test)")
+    add_arguments(parser)
+    arguments = parser.parse_args()
+    record = Record("bench_controllers", arguments)
+    repeat = 2 if arguments.quick else arguments.repeat
     file = kronlag.load_model(MODEL_FILE)
     model = numeric_model(file)
     q0, qd0 = initial_state(file, model)
@@ -86,6 +92,9 @@ def main() -> None:
         overhead = (loop - base) / calls[0]
         print(f"   {method:10s} {base:9.4f}s {loop:9.4f}s {calls[0]:8d} {reference.nfev:6d}/{run.nfev:<6d} "
               f"{overhead * 1e6:11.2f} us   max |q - q_symbolic| = {np.max(np.abs(run.q - reference.q)):.1e}")
+        record.figure(f"cart-pole 10 s, {method}: Python controller overhead a call over the symbolic law",
+                      overhead * 1e6, unit=" µs", target=5, better="lower",
+                      detail=f"CPU time, best of {repeat}, {calls[0]} calls")
     constant = {"u": 0.0}
     bare, run = best(lambda: kronlag.simulate(model, span, q0, qd0, method="compiled", t_eval=outputs,
                                               controller=lambda t, q, qd: constant), repeat)
@@ -102,6 +111,9 @@ def main() -> None:
                                                       controller=sampled), repeat)
             print(f"   {method:10s} {label:13s} {wall:7.3f} s  ({run.steps} steps, {run.nfev} evaluations, "
                   f"{len(run.t)} outputs, x(10) = {run.q[-1, 0]:+.2e}, {run.message.split('.')[0]})")
+            record.figure(f"cart-pole 10 s sampled at 1 kHz, {method}, {label}", wall, unit=" s", target=0.2,
+                          better="lower", detail=f"CPU time, best of {repeat}")
+    record.finish()
 
 
 if __name__ == "__main__":

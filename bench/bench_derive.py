@@ -5,6 +5,7 @@ Run by hand (not a pytest test)::
 
     python3 bench/bench_derive.py            # full run, several minutes
     python3 bench/bench_derive.py --quick    # smoke test: n = 3, 4 only
+    python3 bench/bench_derive.py --json -   # also write bench/results/bench_derive.json
 
 Both tools derive the equations of motion of the same closed planar chain of
 ``n`` uniform links (``kronlag.models.closed_chain``): links ``l1..ln``,
@@ -42,6 +43,8 @@ import platform
 import subprocess
 import sys
 import time
+
+from common import Record, add_arguments
 
 SCRIPT = os.path.abspath(__file__)
 
@@ -256,12 +259,19 @@ def fmt_ratio(ratio: float | None, lower_bound: bool) -> str:
     return f"{prefix}{ratio:.0f}x" if ratio >= 10 else f"{prefix}{ratio:.1f}x"
 
 
+def target_of(n: int, angles: str, kind: str) -> float | None:
+    """The value of :data:`TARGETS` for this case and kind (None: none)."""
+    return next((value for size, convention, what, value in TARGETS
+                 if (size, convention, what) == (n, angles, kind)), None)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes only (n = 3, 4), one run each")
     parser.add_argument("--sympy-budget", type=float, default=SYMPY_BUDGET_S,
                         help=f"SymPy time budget per case in seconds (default {SYMPY_BUDGET_S:.0f})")
     parser.add_argument("--worker", nargs=3, metavar=("KIND", "N", "ANGLES"), help=argparse.SUPPRESS)
+    add_arguments(parser)
     args = parser.parse_args(argv)
 
     if args.worker:
@@ -271,6 +281,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import sympy
 
+    record = Record("bench_derive", args)
     budget = args.sympy_budget
     repeats = 1 if args.quick else REPEATS
     compare = QUICK_COMPARE if args.quick else FULL_COMPARE
@@ -304,6 +315,11 @@ def main(argv: list[str] | None = None) -> int:
         ratio, lower = ratio_of(kron, sym, budget)
         print(f"{n:>3}  {angles:8s}  {fmt_seconds(kron, KRONLAG_BUDGET_S):>10}  "
               f"{fmt_seconds(sym, budget):>10}  {fmt_ratio(ratio, lower):>21}", flush=True)
+        if ratio is not None:
+            record.figure(f"closed_chain({n}, {angles}) derivation: SymPy LagrangesMethod / kronlag", ratio, unit="x",
+                          target=target_of(n, angles, "speedup"),
+                          detail=f"kronlag {kron:.3g} s, best of {repeats} fresh processes"
+                          + ("; lower bound: SymPy hit its budget" if lower else ""))
 
     if not args.quick:
         for n, angles in KRONLAG_ONLY:
@@ -311,6 +327,10 @@ def main(argv: list[str] | None = None) -> int:
             results[(n, angles)] = (kron, None)
             print(f"{n:>3}  {angles:8s}  {fmt_seconds(kron, KRONLAG_BUDGET_S):>10}  "
                   f"{'(not run)':>10}  {'-':>21}", flush=True)
+            record.figure(f"closed_chain({n}, {angles}) derivation: kronlag",
+                          KRONLAG_BUDGET_S if kron is None else kron, unit=" s",
+                          target=target_of(n, angles, "seconds"), better="lower",
+                          detail="did not finish" if kron is None else f"best of {repeats} fresh processes")
 
         print()
         print(f"growth of derive alone (the numeric model's derivation, CPU seconds), load average {os.getloadavg()[0]:.1f} "
@@ -324,6 +344,8 @@ def main(argv: list[str] | None = None) -> int:
             exponent = growth_exponent(sizes, times)
             verdict = "PASS" if exponent <= GROWTH_TARGET else "MISS"
             print(f"  {angles:8s} {listed}  ~ n^{exponent:.2f} (target <= n^{GROWTH_TARGET}) {verdict}")
+            record.figure(f"closed_chain, {angles}: growth exponent of derive (CPU)", exponent, target=GROWTH_TARGET,
+                          better="lower", detail=listed)
 
         print()
         print("targets")
@@ -349,6 +371,7 @@ def main(argv: list[str] | None = None) -> int:
                 else:
                     verdict, got = "MISS", f"{kron:.2f} s ({kron - value:.2f} s / {kron / value:.2f}x over)"
             print(f"  {label:42s} {got:32s} {verdict}")
+    record.finish()
     return status
 
 

@@ -5,7 +5,8 @@ Run by hand (not a pytest test; needs ``pip install pin``)::
 
     python3 bench/bench_forward_dynamics.py            # n = 4, 12, 20, 30, 40, 60, 80, both conventions
     python3 bench/bench_forward_dynamics.py --n 4 8 --angles relative
-    python3 bench/bench_forward_dynamics.py --n 3 --quick   # smoke test
+    python3 bench/bench_forward_dynamics.py --quick         # smoke test: n = 4, 12, 100 times fewer calls
+    python3 bench/bench_forward_dynamics.py --json -        # also write bench/results/bench_forward_dynamics.json
 
 The mechanism is ``kronlag.models.closed_chain(n, angles)``: ``n`` uniform
 links in the x-y plane (lengths ``l_i``, masses ``m_i``, central inertias
@@ -51,6 +52,8 @@ import numpy as np
 
 import kronlag
 from kronlag import models
+
+from common import Record, add_arguments
 
 #: Smoke-test mode (``--quick``): far fewer timed calls.
 QUICK = False
@@ -201,17 +204,20 @@ def bench(n: int, angles: str) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--n", type=int, nargs="+", default=[4, 12, 20, 30, 40, 60, 80], help="numbers of links")
+    parser.add_argument("--n", type=int, nargs="+", help="numbers of links (default: 4 12 20 30 40 60 80; with "
+                        "--quick: 4 12)")
     parser.add_argument("--angles", nargs="+", choices=("relative", "absolute"), default=["relative", "absolute"],
                         help="angle conventions of closed_chain")
     parser.add_argument("--quick", action="store_true", help="smoke test: 100 times fewer calls")
+    add_arguments(parser)
     arguments = parser.parse_args()
+    record = Record("bench_forward_dynamics", arguments)
     global QUICK
     QUICK = arguments.quick
     print(f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, "
           f"numpy {np.__version__}")
     summary = []
-    for n in arguments.n:
+    for n in arguments.n or ([4, 12] if QUICK else [4, 12, 20, 30, 40, 60, 80]):
         for angles in arguments.angles:
             times = bench(n, angles)
             summary.append((n, angles, times["interleaved ratio"]))
@@ -220,6 +226,10 @@ def main() -> None:
     for n, angles, ratio in summary:
         print(f"  closed_chain({n:2d}, {angles!r:10s})  {ratio:5.2f}  (target <= {TARGET_RATIO}) "
               f"{'ok' if ratio <= TARGET_RATIO else 'OVER'}")
+    for n, angles, ratio in summary:
+        record.figure(f"closed_chain({n}, {angles}): C forward_dynamics / pinocchio constraintDynamics", ratio,
+                      unit="x", target=TARGET_RATIO, better="lower", detail=f"median of {BLOCKS} interleaved blocks")
+    record.finish()
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ examples/slider_crank_friction.toml.
 
 Run by hand (not a pytest test)::
 
-    python3 bench/bench_friction.py [--repeat 5] [--rtol 1e-8] [--law exact|smooth]
+    python3 bench/bench_friction.py [--repeat 5] [--rtol 1e-8] [--law exact|smooth|both] [--quick] [--json -]
 
 The frictionless model is the file with its ``friction = {...}`` lines removed (the same bodies,
 joints and start).  Both run ``kronlag.simulate`` with the compiled method (CVODE) over the file's
@@ -13,7 +13,7 @@ joints and start).  Both run ``kronlag.simulate`` with the compiled method (CVOD
 so that a change of the machine's load hits both, and each time is the best of ``--repeat`` in CPU
 time of this process (``time.process_time``).  Printed: the times, the right-hand-side evaluations
 (friction changes the motion, hence the steps), the ratio of the times and the ratio per evaluation.
-Target (issue 18): a ratio <= 1.5.
+Target (issue 18): a ratio <= 1.5, for both laws (``--law both``, the default).  ``--quick``: best of 2.
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ from pathlib import Path
 
 import kronlag
 from kronlag.app.workflows import initial_state, numeric_model
+
+from common import Record, add_arguments
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 FILES = {"four-bar": EXAMPLES / "four_bar_friction.toml", "slider-crank": EXAMPLES / "slider_crank_friction.toml"}
@@ -49,15 +51,20 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--rtol", type=float, default=1e-8)
-    parser.add_argument("--law", choices=("smooth", "exact"), default="exact")
+    parser.add_argument("--law", choices=("smooth", "exact", "both"), default="both")
+    parser.add_argument("--quick", action="store_true", help="best of 2 (smoke test)")
+    add_arguments(parser)
     arguments = parser.parse_args()
+    record = Record("bench_friction", arguments)
+    repeat = 2 if arguments.quick else arguments.repeat
+    laws = ("exact", "smooth") if arguments.law == "both" else (arguments.law,)
     with tempfile.TemporaryDirectory() as directory:
-        for name, path in FILES.items():
-            runs = {friction: _model(path, friction=friction, directory=Path(directory), law=arguments.law)
+        for law, (name, path) in ((law, item) for law in laws for item in FILES.items()):
+            runs = {friction: _model(path, friction=friction, directory=Path(directory), law=law)
                     for friction in (True, False)}
             times = {True: float("inf"), False: float("inf")}
             evaluations = {}
-            for _ in range(arguments.repeat):
+            for _ in range(repeat):
                 for friction, (model, q0, qd0, t_end) in runs.items():
                     start = time.process_time()
                     trajectory = kronlag.simulate(model, (0, t_end), q0, qd0, method="compiled",
@@ -67,9 +74,12 @@ def main() -> None:
                     evaluations[friction] = trajectory.nfev
             ratio = times[True] / times[False]
             per_call = (times[True] / max(evaluations[True], 1)) / (times[False] / max(evaluations[False], 1))
-            print(f"{name} ({arguments.law} law): friction {times[True] * 1e3:.1f} ms ({evaluations[True]} evaluations), "
+            print(f"{name} ({law} law): friction {times[True] * 1e3:.1f} ms ({evaluations[True]} evaluations), "
                   f"frictionless {times[False] * 1e3:.1f} ms ({evaluations[False]} evaluations): "
                   f"ratio {ratio:.2f} (target <= 1.5), per evaluation {per_call:.2f}")
+            record.figure(f"{name}, {law} friction law: friction / frictionless", ratio, unit="x", target=1.5,
+                          better="lower", detail=f"CPU time, best of {repeat}; per evaluation {per_call:.2f}x")
+    record.finish()
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ Run by hand (not a pytest test)::
     python3 bench/bench_limits.py            # 10 s runs, best of 7
     python3 bench/bench_limits.py --quick    # 2 s runs, best of 3
     python3 bench/bench_limits.py --validate # also the validation table of the closed forms
+    python3 bench/bench_limits.py --json -   # also write bench/results/bench_limits.json
 
 The cases: the shipped four-bar and slider-crank model files (their parameter values and initial
 states), simulated for the span with rtol 1e-8, atol 1e-10 and outputs every 0.01 s, by the default
@@ -28,6 +29,8 @@ import sympy as sp
 import kronlag
 from kronlag.app.workflows import initial_state, numeric_model
 from kronlag.model.builtin import example_path
+
+from common import Record, add_arguments
 
 TARGET_RATIO = 1.5
 
@@ -120,7 +123,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="2 s runs, best of 3")
     parser.add_argument("--validate", action="store_true", help="also print the validation table")
+    add_arguments(parser)
     arguments = parser.parse_args()
+    record = Record("bench_limits", arguments)
     if arguments.validate:
         validation()
     t_end, repeats = (2.0, 3) if arguments.quick else (10.0, 7)
@@ -138,7 +143,10 @@ def main() -> int:
             difference = float(np.max(np.abs(trajectory.q - reference.q)))
             print(f"{name:<14} {method:<11} {without:12.4f} {with_limit:10.4f} {ratio:7.2f}  {difference:9.2e}  "
                   f"<= {TARGET_RATIO} {'ok' if ratio <= TARGET_RATIO else 'MISSED'}")
+            record.figure(f"{name} {t_end:g} s, {method} method: with an unreached limit / without", ratio,
+                          unit="x", target=TARGET_RATIO, better="lower", detail=f"best of {repeats}")
     print(f"worst ratio {worst:.2f} (target <= {TARGET_RATIO})")
+    record.finish()
     return 0
 
 

@@ -3,7 +3,7 @@
 
 Run by hand (not a pytest test)::
 
-    PYTHONPATH=src python3 bench/bench_redundant.py [--blocks 7] [--quick]
+    PYTHONPATH=src python3 bench/bench_redundant.py [--blocks 7] [--quick] [--json -]
 
 Cases: IFToMM A04 Bricard mechanism (``Phi_q`` of rank 4 < 5 everywhere), 10 s, outputs at the
 benchmark's 1001 times, at the default tolerances (rtol 1e-8, atol 1e-10) and at rtol 1e-10
@@ -37,6 +37,8 @@ from kronlag.benchmarks.iftomm import BRICARD_ENERGY_SCALE, benchmark
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from helpers import DOUBLE_PARALLELOGRAM_VALUES, double_parallelogram
+
+from common import Record, add_arguments
 
 TOLERANCES = {"default": {"rtol": 1e-8, "atol": 1e-10}, "rtol 1e-10": {"rtol": 1e-10, "atol": 1e-12}}
 METHODS = {"new (default)": "auto", "old (ali3p)": "ali3p"}
@@ -84,11 +86,28 @@ def targets(name: str, tolerance: str, wall: float, cpu: float, trajectory: kron
     return "; ".join(notes)
 
 
+def record_targets(record: Record, name: str, tolerance: str, wall: float, cpu: float,
+                   trajectory: kronlag.Trajectory, energy_drift: float, blocks: int) -> None:
+    """The figures of :func:`targets` in ``record`` (the default method's row)."""
+    where = f"{name}, 10 s, {tolerance} tolerance, default method"
+    if name.startswith("A04") and tolerance == "default":
+        record.figure(f"{where}: wall time", wall * 1e3, unit=" ms", target=A04_TIME_TARGET * 1e3, better="lower",
+                      detail=f"median of {blocks} blocks")
+        record.figure(f"{where}: CPU time", cpu * 1e3, unit=" ms", target=A04_TIME_TARGET * 1e3, better="lower",
+                      detail=f"median of {blocks} blocks")
+    if tolerance == "rtol 1e-10":
+        record.figure(f"{where}: finished within the step limit (1 = status 0)", float(trajectory.status == 0),
+                      target=1, detail=f"status {trajectory.status}, {trajectory.steps} steps")
+        record.figure(f"{where}: energy drift", energy_drift, target=DRIFT_TARGET, better="lower")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--blocks", type=int, default=7)
     parser.add_argument("--quick", action="store_true", help="3 blocks")
+    add_arguments(parser)
     arguments = parser.parse_args()
+    record = Record("bench_redundant", arguments)
     blocks = 3 if arguments.quick else arguments.blocks
     warnings.simplefilter("ignore", kronlag.RedundantConstraintsWarning)
     problems = cases()
@@ -125,9 +144,12 @@ def main() -> None:
                     if label == "new (default)" else ""
                 print(f"{name:15} {tolerance:11} {label:15} {median * 1e3:8.1f} ms {cpu * 1e3:7.1f} ms "
                       f"{trajectory.steps:7d} {energy_drift:9.1e} {trajectory.status:6d}  {ratio}  {target}")
+                if label == "new (default)":
+                    record_targets(record, name, tolerance, median, cpu, trajectory, energy_drift, blocks)
             intervals = last[name, tolerance, "new (default)"].intervals
             print(f"{'':27} new method's intervals: " + "; ".join(f"{i.method} {i.t_start:g}-{i.t_end:g} s"
                                                                     for i in intervals))
+    record.finish()
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ Run by hand (needs ``pip install pin example-robot-data``)::
     python3 bench/bench_robots.py                 # every robot of ROBOTS
     python3 bench/bench_robots.py panda ur5       # some of them
     python3 bench/bench_robots.py --quick         # 100 times fewer timed calls
+    python3 bench/bench_robots.py --json -        # also write bench/results/bench_robots.json
 
 For each robot: the System is loaded from the URDF as shipped, derived and compiled (times
 printed); Pinocchio's model is built from the same file (``buildModelFromUrdf``, mimic joints as
@@ -41,6 +42,10 @@ from pathlib import Path
 import numpy as np
 
 import kronlag
+
+#: Issues 19 and 21: load + derive + build at most this (s) per robot; FD at most this fraction of ``aba``.
+TARGET_BUILD_S = 5.0
+TARGET_RATIO = 0.8
 
 #: name -> path under example-robot-data's robots folder
 ROBOTS = {
@@ -418,11 +423,15 @@ def run_mjcf(name: str, *, quick: bool) -> dict:
 
 
 def main(argv=None) -> int:
+    from common import Record, add_arguments  # here: the tests load this file as a module, without bench/ on the path
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     known = [*ROBOTS, *FLOATING, "cassie", "arm", "four_bar"]
     parser.add_argument("robots", nargs="*", help=f"some of {', '.join(known)} (default: all)")
     parser.add_argument("--quick", action="store_true")
+    add_arguments(parser)
     arguments = parser.parse_args(argv)
+    record = Record("bench_robots", arguments)
     unknown = [name for name in arguments.robots if name not in known]
     if unknown:
         parser.error(f"unknown robot(s) {', '.join(unknown)}; known: {', '.join(known)}")
@@ -453,9 +462,25 @@ def main(argv=None) -> int:
               f"{row['load_s']:>8.2f}{row['derive_s']:>10.2f}{row['build_s']:>9.2f}{row['max_rel']:>14.2e}"
               f"{row['worst']:>8}{row['fd_us']:>9.2f}{row['aba_us']:>8.2f}{row['fd_us'] / row['aba_us']:>8.2f}",
               flush=True)
+        if name != "cassie":
+            record_row(record, row, quick=arguments.quick)
     if failed:
         print("MISMATCH: a difference above 1e-9")
+    record.finish()
     return 1 if failed else 0
+
+
+def record_row(record, row: dict, *, quick: bool) -> None:
+    """A row's figures: load + derive + build against its target, FD against the peer (a target against
+    Pinocchio's ``aba``; MuJoCo's ``mj_forward`` does more, so its ratio is for information)."""
+    record.figure(f"{row['robot']}: load + derive + build", row["load_s"] + row["derive_s"] + row["build_s"],
+                  unit=" s", target=TARGET_BUILD_S, better="lower",
+                  detail=f"derive {row['derive_s']:.2f} s, build {row['build_s']:.2f} s")
+    mujoco = row["robot"].endswith(".xml")
+    record.figure(f"{row['robot']}: forward dynamics / {'MuJoCo mj_forward' if mujoco else 'Pinocchio aba'}",
+                  row["fd_us"] / row["aba_us"], unit="x", target=None if mujoco else TARGET_RATIO, better="lower",
+                  detail=f"{row['fd_us']:.2f} µs vs {row['aba_us']:.2f} µs, best of 5 x {200 if quick else 20000} "
+                  "calls each (not interleaved)")
 
 
 if __name__ == "__main__":

@@ -4,7 +4,8 @@
 Run by hand (not a pytest test)::
 
     python3 bench/bench_sweep.py                  # 1000 cases, 2 s each, 2 workers, 3 blocks
-    python3 bench/bench_sweep.py --cases 200 --blocks 2   # quick
+    python3 bench/bench_sweep.py --quick          # 200 cases, 2 blocks (smoke test)
+    python3 bench/bench_sweep.py --json -         # also write bench/results/bench_sweep.json
 
 The cases: a grid of the crank torque ``tau`` and the initial crank speed ``q1d`` (the other values
 from ``examples/four_bar.toml``), each simulated for ``--t-end`` seconds (compiled CVODE, outputs at
@@ -47,6 +48,8 @@ import numpy as np
 import kronlag
 from kronlag.model.builtin import load_example
 from kronlag.studies.sweeps import DEFAULT_OUTCOMES, grid
+
+from common import Record, add_arguments
 
 GUESS = ([1.0, 0.5583, 1.3347], [0.0, 0.0, 0.0])
 
@@ -94,7 +97,12 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--blocks", type=int, default=3, help="blocks of interleaved runs (medians over them)")
     parser.add_argument("--dask", action="store_true", help="also a Dask LocalCluster started in the timing")
+    parser.add_argument("--quick", action="store_true", help="200 cases, 2 blocks (smoke test)")
+    add_arguments(parser)
     arguments = parser.parse_args()
+    if arguments.quick:
+        arguments.cases, arguments.blocks = 200, 2
+    record = Record("bench_sweep", arguments)
     cases, small = cases_of(arguments.cases), cases_of(arguments.small)
     t_eval = np.linspace(0.0, arguments.t_end, arguments.points)
     example = load_example("four_bar", apply_drives=False)
@@ -145,14 +153,18 @@ def main() -> None:
     print("time in a case, median (ms): "
           + "; ".join(f"{where}: wall {1000 * statistics.median(wall[where]):.2f}, "
                       f"CPU {1000 * statistics.median(cpu[where]):.2f}" for where in ("in-process", "worker")))
-    print(f"ratio one process / {arguments.workers} workers: "
-          f"{median['sweep, one process'] / median[workers]:.2f}   (target >= 1.7 on an idle machine)")
-    print(f"ratio plain loop / {arguments.workers} workers:  "
-          f"{median['plain loop'] / median[workers]:.2f}   (target >= 1.0)")
-    print(f"ratio plain loop / one-process sweep: {median['plain loop'] / median['sweep, one process']:.2f}")
-    print(f"small sweep ({len(small)} cases), plain loop / sweep: "
-          f"{median['small: plain loop'] / median['small: sweep (default)']:.2f}   (target >= 1.0)")
+    detail = f"{len(cases)} cases, ratio of the medians of {arguments.blocks} blocks"
+    record.figure(f"four-bar sweep: one process / {arguments.workers} workers",
+                  median["sweep, one process"] / median[workers], unit="x", target=1.7, detail=detail)
+    record.figure(f"four-bar sweep: plain loop / {arguments.workers} workers",
+                  median["plain loop"] / median[workers], unit="x", target=1.0, detail=detail)
+    record.figure("four-bar sweep: plain loop / one-process sweep",
+                  median["plain loop"] / median["sweep, one process"], unit="x", detail=detail)
+    record.figure(f"four-bar small sweep ({len(small)} cases): plain loop / sweep (default)",
+                  median["small: plain loop"] / median["small: sweep (default)"], unit="x", target=1.0,
+                  detail=f"ratio of the medians of {arguments.blocks} blocks")
     print(f"results identical (bitwise) in one process, on workers and in the plain loop: {agree}")
+    record.finish()
 
 
 def dask_sweep(model, cases, arguments, common):

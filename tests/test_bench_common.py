@@ -72,6 +72,19 @@ def test_a_record_written_as_json_becomes_a_row_of_the_generated_page(bench_modu
     assert cells[1:4] == ["22.5x", "≥ 30x", "**no**"]
     assert f"on {data['machine']['cpus']} CPUs" in cells[4] and cells[6] == "`bench_x`"
     assert "`bench_y` not run" in page
+    assert report.QUICK_MARK not in row
+
+
+def test_a_quick_run_is_marked_as_a_smoke_run_in_the_page(bench_modules, tmp_path):
+    """Quick-mode figures must not pass for the real measurement: the record says ``quick`` and every row
+    of it is marked."""
+    common, report = bench_modules
+    record = common.Record("bench_x", argparse.Namespace(json=None, quick=True))
+    record.figure("overhead", 3.0, unit=" µs", target=5, better="lower")
+    data = record.as_dict()
+    assert data["quick"] is True
+    row = next(line for line in report.page({"bench_x": data}).splitlines() if "overhead" in line)
+    assert row.startswith(f"| {report.QUICK_MARK} overhead") and "(quick)" in row
 
 
 def test_the_generated_page_is_the_one_in_the_docs(bench_modules):
