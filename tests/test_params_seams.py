@@ -274,7 +274,7 @@ def test_batches_take_one_pass_over_the_cases():
                 Counted.reads += 1
                 yield item
 
-    cases = Counted({"tau": float(i)} for i in range(5000))
+    cases = Counted((i, {"tau": float(i)}) for i in range(5000))  # the (index, case) pairs
     batches = list(_batches(cases, 1))
     assert len(batches) == 5000 and batches[4999] == [(4999, {"tau": 4999.0})]
     assert Counted.reads == 5000  # the old slicing of list(enumerate(cases)) per batch read 5000 per batch

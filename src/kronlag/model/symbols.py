@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
-from functools import cache
 
 import sympy as sp
 
@@ -55,12 +54,17 @@ def check_name(name, what: str) -> str:
     return name
 
 
-@cache
+_UNIONS_ITS_ARGUMENTS: dict[type, bool] = {}
+
+
 def _unions_its_arguments(kind: type) -> bool:
     """Whether ``kind``'s free symbols are just the union of its arguments' (SymPy's default rule);
     symbols, matrices and binding forms (Derivative, Integral, Lambda, Subs...) have their own."""
-    owner = next(base for base in kind.__mro__ if "free_symbols" in vars(base))
-    return owner is sp.Basic
+    known = _UNIONS_ITS_ARGUMENTS.get(kind)
+    if known is None:
+        owner = next(base for base in kind.__mro__ if "free_symbols" in vars(base))
+        known = _UNIONS_ITS_ARGUMENTS[kind] = owner is sp.Basic
+    return known
 
 
 def free_symbols(expression) -> set[sp.Symbol]:

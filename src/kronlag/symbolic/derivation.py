@@ -569,6 +569,8 @@ class _DerivedMatrices:
 
     def sympy(self, name: str):
         matrix = self._native(name)
+        if matrix is None:
+            raise KeyError(f"the derivation has no matrix {name!r}")
         if name in self._SCALARS:
             converted = self.converter(matrix[0, 0])
             return self.simplifier(converted) if self.simplifier else converted

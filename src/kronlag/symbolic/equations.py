@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property, partial
 from typing import TYPE_CHECKING, Any, Protocol
@@ -43,7 +43,7 @@ class MatrixSource(Protocol):
 class StoredMatrices:
     """A :class:`MatrixSource` of SymPy matrices held (or computed by ``deferred`` callables on first use)."""
 
-    def __init__(self, matrices: dict[str, Any], *, deferred: dict[str, Callable[[], Any]] | None = None):
+    def __init__(self, matrices: dict[str, Any], *, deferred: Mapping[str, Callable[[], Any]] | None = None):
         self.matrices, self.deferred = matrices, dict(deferred or {})
 
     @property
