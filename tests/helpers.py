@@ -321,3 +321,52 @@ def double_parallelogram() -> kronlag.System:
 
 #: Values of :func:`double_parallelogram`.
 DOUBLE_PARALLELOGRAM_VALUES = dict(l=0.7, d=1.3, m=1.2, m_c=2.5, J=0.09, J_c=0.6, g=9.81)
+
+
+# -- a bar swinging on a pin with friction (tests/test_friction.py, tests/test_stiction.py) ------------
+
+#: Its parameter values: mass, length, gravity, friction coefficient and pin radius.
+PIN_FRICTION_PENDULUM_VALUES = {"m": 2.0, "L": 0.9, "g": 9.81, "mu": 0.1, "r": 0.01}
+
+
+def pin_friction_pendulum_file(friction: str) -> str:
+    """The model file of a uniform bar (mass ``m``, length ``L``) on a pin at one end, whose joint has
+    ``friction = <friction>`` (a TOML inline table)."""
+    return f"""
+name = "pendulum"
+coordinates = ["x", "y", "th"]
+gravity = [0, "-g"]
+
+[parameters]
+m = {{value = 2.0, unit = "kg"}}
+L = {{value = 0.9, unit = "m"}}
+g = {{value = 9.81, unit = "m/s^2"}}
+mu = 0.1
+r = {{value = 0.01, unit = "m"}}
+
+[[bodies]]
+name = "bar"
+type = "planar"
+mass = "m"
+inertia = "m*L**2/12"
+position = ["x", "y"]
+angle = "th"
+
+[[joints]]
+name = "pivot"
+type = "revolute"
+body_a = "ground"
+body_b = "bar"
+at_b = ["-L/2", 0]
+friction = {friction}
+"""
+
+
+def pin_friction_pendulum(**friction):
+    """The same bar built with the API: ``Friction(kinetic=mu, radius=r, **friction)`` on its pin."""
+    m, L, g, mu, r = sp.symbols("m L g mu r")
+    system = mechanism([free_body("bar", mass=m, inertia=m * L ** 2 / 12)], parameters=[m, L, g, mu, r],
+                       gravity=(0, -g))
+    system.add_joint("revolute", "ground", "bar", at_b=(-L / 2, 0), name="pivot",
+                     friction=kronlag.Friction(kinetic=mu, radius=r, **friction))
+    return system

@@ -6,6 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
+from helpers import (
+    PIN_FRICTION_PENDULUM_VALUES,
+    pin_friction_pendulum,
+    pin_friction_pendulum_file,
+)
 
 import kronlag
 from kronlag.app.workflows import initial_state, numeric_model
@@ -114,34 +119,7 @@ def test_block_below_the_friction_angle_creeps_at_the_smooth_laws_speed():
 
 # -- a pendulum with pin friction ------------------------------------------------------------------
 
-PENDULUM_FILE = """
-name = "pendulum"
-coordinates = ["x", "y", "th"]
-gravity = [0, "-g"]
-
-[parameters]
-m = {value = 2.0, unit = "kg"}
-L = {value = 0.9, unit = "m"}
-g = {value = 9.81, unit = "m/s^2"}
-mu = 0.1
-r = {value = 0.01, unit = "m"}
-
-[[bodies]]
-name = "bar"
-type = "planar"
-mass = "m"
-inertia = "m*L**2/12"
-position = ["x", "y"]
-angle = "th"
-
-[[joints]]
-name = "pivot"
-type = "revolute"
-body_a = "ground"
-body_b = "bar"
-at_b = ["-L/2", 0]
-friction = {kinetic = "mu", radius = "r", smoothing_velocity = 1e-3}
-"""
+PENDULUM_FILE = pin_friction_pendulum_file('{kinetic = "mu", radius = "r", smoothing_velocity = 1e-3}')
 
 
 def _pendulum(tmp_path, *, from_file: bool):
@@ -150,12 +128,8 @@ def _pendulum(tmp_path, *, from_file: bool):
         path.write_text(PENDULUM_FILE)
         model_file = kronlag.load_model(path)
         return kronlag.derive(model_file.system).numeric(model_file.numeric_values())
-    m, L, g, mu, r = sp.symbols("m L g mu r")
-    system = mechanism([free_body("bar", mass=m, inertia=m * L ** 2 / 12)], parameters=[m, L, g, mu, r],
-                       gravity=(0, -g))
-    system.add_joint("revolute", "ground", "bar", at_b=(-L / 2, 0), name="pivot",
-                     friction=kronlag.Friction(kinetic=mu, radius=r, smoothing_velocity=1e-3))
-    return kronlag.derive(system).numeric({"m": 2.0, "L": 0.9, "g": G, "mu": 0.1, "r": 0.01})
+    system = pin_friction_pendulum(smoothing_velocity=1e-3)
+    return kronlag.derive(system).numeric(PIN_FRICTION_PENDULUM_VALUES)
 
 
 def _swing(model, angle: float, t_end: float, samples: int, rate: float = 0.0):

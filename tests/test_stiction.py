@@ -9,6 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sp
+from helpers import (
+    PIN_FRICTION_PENDULUM_VALUES,
+    pin_friction_pendulum,
+    pin_friction_pendulum_file,
+)
 
 import kronlag
 from kronlag.model.free_bodies import free_body, mechanism
@@ -148,34 +153,7 @@ def test_pushed_block_stops_at_the_closed_form_time_and_distance_and_stays(sourc
 
 # -- a Coulomb-damped pendulum -----------------------------------------------------------------------
 
-PENDULUM_FILE = """
-name = "pendulum"
-coordinates = ["x", "y", "th"]
-gravity = [0, "-g"]
-
-[parameters]
-m = {value = 2.0, unit = "kg"}
-L = {value = 0.9, unit = "m"}
-g = {value = 9.81, unit = "m/s^2"}
-mu = 0.1
-r = {value = 0.01, unit = "m"}
-
-[[bodies]]
-name = "bar"
-type = "planar"
-mass = "m"
-inertia = "m*L**2/12"
-position = ["x", "y"]
-angle = "th"
-
-[[joints]]
-name = "pivot"
-type = "revolute"
-body_a = "ground"
-body_b = "bar"
-at_b = ["-L/2", 0]
-friction = {law = "exact", kinetic = "mu", radius = "r"}
-"""
+PENDULUM_FILE = pin_friction_pendulum_file('{law = "exact", kinetic = "mu", radius = "r"}')
 
 MU, RADIUS, LENGTH = 0.1, 0.01, 0.9
 
@@ -186,12 +164,7 @@ def _pendulum(source: str, tmp_path):
         path.write_text(PENDULUM_FILE)
         model_file = kronlag.load_model(path)
         return kronlag.derive(model_file.system).numeric(model_file.numeric_values())
-    m, L, g, mu, r = sp.symbols("m L g mu r")
-    system = mechanism([free_body("bar", mass=m, inertia=m * L ** 2 / 12)], parameters=[m, L, g, mu, r],
-                       gravity=(0, -g))
-    system.add_joint("revolute", "ground", "bar", at_b=(-L / 2, 0), name="pivot",
-                     friction=kronlag.Friction(kinetic=mu, radius=r, law="exact"))
-    return kronlag.derive(system).numeric({"m": MASS, "L": LENGTH, "g": G, "mu": MU, "r": RADIUS}, backend=source)
+    return kronlag.derive(pin_friction_pendulum(law="exact")).numeric(PIN_FRICTION_PENDULUM_VALUES, backend=source)
 
 
 def _swing(model, angle: float, t_end: float):
