@@ -151,13 +151,19 @@ class Layout:
         return variables
 
 
-def _scalar_variable(variable: Variable) -> str:
+def _common_attributes(variable: Variable) -> list[str]:
+    """The attributes FMI 2.0's ``ScalarVariable`` and FMI 3.0's ``Float64`` share."""
     attributes = [f"name={quoteattr(variable.name)}", f'valueReference="{variable.reference}"',
                   f'causality="{variable.causality}"', f'variability="{variable.variability}"']
     if variable.initial:
         attributes.append(f'initial="{variable.initial}"')
     if variable.description:
         attributes.append(f"description={quoteattr(variable.description)}")
+    return attributes
+
+
+def _scalar_variable(variable: Variable) -> str:
+    attributes = _common_attributes(variable)
     real = []
     if variable.unit and base_unit(variable.unit) is not None:
         real.append(f"unit={quoteattr(variable.unit)}")
@@ -192,12 +198,7 @@ def _structure(variables: Sequence[Variable]) -> tuple[list[Variable], list[Vari
 
 def _float64(variable: Variable) -> str:
     """An FMI 3.0 ``Float64`` variable."""
-    attributes = [f"name={quoteattr(variable.name)}", f'valueReference="{variable.reference}"',
-                  f'causality="{variable.causality}"', f'variability="{variable.variability}"']
-    if variable.initial:
-        attributes.append(f'initial="{variable.initial}"')
-    if variable.description:
-        attributes.append(f"description={quoteattr(variable.description)}")
+    attributes = _common_attributes(variable)
     if variable.unit and base_unit(variable.unit) is not None:
         attributes.append(f"unit={quoteattr(variable.unit)}")
     if variable.start is not None:
