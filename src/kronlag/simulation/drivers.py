@@ -298,6 +298,8 @@ def segment_status(segment: Segment, model: NumericModel, kind: str) -> tuple[Re
     result = Result.of_code(segment.flag)
     if result is Result.SUCCESS:
         return result, SUCCESS
+    if result is Result.LIMIT:  # an event: the run goes on from there (no message shown; q not formatted)
+        return result, f"{result.value} at t = {segment.t_end:.9g}"
     q = segment.y_end[:model.m]
     if result is Result.APPROACH:
         return result, approach_text(segment.t_end, q)

@@ -36,9 +36,11 @@
  * Jacobian (2 m evaluations) and factor I - gamma J at nearly every step of the climb back from
  * order 1 (cart-pole at 1 kHz: 12 of the 29 evaluations a sample, 6 factorizations); the fixed-point
  * corrector needs neither (14 evaluations a sample, half the time; also faster at 100 Hz, 20 Hz
- * and 2 Hz).  The dense linear solver stays attached, unused by that corrector: measured, CVODE then
- * needs 1.5 evaluations a step rather than 2.2 (it keeps its estimate of the corrector's convergence
- * rate from step to step instead of starting each step from 1).
+ * and 2 Hz; without a sampled controller it was slower, and with joint friction 7-9 % faster but a
+ * test's path through a stop of the four-bar's four pins changed enough to meet a state where the
+ * pins' friction forces did not converge).  The dense linear solver stays attached, unused by that
+ * corrector: measured, CVODE then needs 1.5 evaluations a step rather than 2.2 (it keeps its estimate
+ * of the corrector's convergence rate from step to step instead of starting each step from 1).
  *
  * The scikit-sundae wheel ships the SUNDIALS 7 shared libraries but not their
  * headers, so the few declarations needed are written out below (SUNDIALS 7.x,
@@ -335,7 +337,7 @@ int kronlag_cvode(kronlag_options *o)
         || !(LS = SUNLinSol_Dense(y, J, ctx)) || !(mem = CVodeCreate(CV_ADAMS, ctx))) goto done;
     double *x = N_VGetArrayPointer(y), *xi = N_VGetArrayPointer(dense);
     memcpy(x, o->y0, KL_N * sizeof(double));
-    int fixed_point = o->control_mode == KL_CONTROL_SAMPLED;
+    int fixed_point = o->control_mode == KL_CONTROL_SAMPLED;  /* see the top */
     if (CVodeInit(mem, kl_rhs, t0, y) || CVodeSStolerances(mem, o->rtol, o->atol) || CVodeSetUserData(mem, &data)
         || CVodeSetLinearSolver(mem, LS, J)
         || (fixed_point && (!(NLS = SUNNonlinSol_FixedPoint(y, 0, ctx)) || CVodeSetNonlinearSolver(mem, NLS)))
