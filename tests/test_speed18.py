@@ -11,7 +11,12 @@ import math
 
 import numpy as np
 import pytest
-from helpers import CART_POLE_VALUES, PIN_FRICTION_PENDULUM_VALUES, cart_pole_by_joints, pin_friction_pendulum
+from helpers import (
+    CART_POLE_VALUES,
+    PIN_FRICTION_PENDULUM_VALUES,
+    cart_pole_by_joints,
+    pin_friction_pendulum,
+)
 
 import kronlag
 from kronlag.numeric.codegen import python_backend
