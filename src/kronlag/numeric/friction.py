@@ -135,38 +135,40 @@ def solve_with_friction(solve: Callable[[np.ndarray], tuple], flat: np.ndarray, 
     """Forward dynamics with friction: ``(qdd, lam, mu, rank)`` as ``solve(flat)`` returns them (the
     solve of the dynamics kernel's output ``flat`` without friction), with the friction forces of the
     stacked ``records`` included (module docstring: Newton steps on ``f - phi(lambda(f)) = 0`` from
-    ``f = 0``); rank -1 as ``solve`` gives it."""
+    ``f = 0``); rank -1 as ``solve`` gives it.  A joint whose force is zero whatever the load (held, or
+    ``r mu(v) = 0`` without a viscous term) is no unknown and needs no response."""
     m = len(qd)
     base = solve(flat)
     if base[3] < 0:
         return base
     joints = [_split(record, m) for record in records.reshape(-1, record_size(m))]
+    rates = [float(joint["J"] @ qd) for joint in joints]
+    active = [(joint, _factor(joint, rate), _viscous(joint, rate)) for joint, rate in zip(joints, rates)]
+    active = [(joint, factor, viscous) for joint, factor, viscous in active if factor != 0.0 or viscous != 0.0]
     responses = []
-    for joint in joints:
+    for joint, _, _ in active:
         shifted = flat.copy()
         shifted[h_offset:h_offset + m] -= joint["J"]
         solution = solve(shifted)
         if solution[3] < 0:
             return solution
         responses.append([after - before for after, before in zip(solution[:3], base[:3])])
-    rates = [float(joint["J"] @ qd) for joint in joints]
-    factors = [_factor(joint, rate) for joint, rate in zip(joints, rates)]
-    wrenches = [_wrench(joint, base[1]) for joint in joints]
-    unit_wrenches = [[_wrench(joint, response[1]) for response in responses] for joint in joints]
-    forces = np.zeros(len(joints))
+    wrenches = [_wrench(joint, base[1]) for joint, _, _ in active]
+    unit_wrenches = [[_wrench(joint, response[1]) for response in responses] for joint, _, _ in active]
+    forces = np.zeros(len(active))
     for _ in range(FRICTION_MAX_ITERATIONS):
-        residual, jacobian = np.zeros(len(joints)), np.eye(len(joints))
-        for j, joint in enumerate(joints):
+        residual, jacobian = np.zeros(len(active)), np.eye(len(active))
+        for j, (joint, factor, viscous) in enumerate(active):
             wrench = wrenches[j] + sum(f * unit for f, unit in zip(forces, unit_wrenches[j]))
-            residual[j] = forces[j] - factors[j] * _load(joint, wrench) - _viscous(joint, rates[j])
+            residual[j] = forces[j] - factor * _load(joint, wrench) - viscous
             slope = _load_slope(joint, wrench)
-            jacobian[j] -= factors[j] * np.array([slope @ unit for unit in unit_wrenches[j]])
+            jacobian[j] -= factor * np.array([slope @ unit for unit in unit_wrenches[j]])
         try:
             step = np.linalg.solve(jacobian, residual)
         except np.linalg.LinAlgError:
             break
         forces = forces - step
-        if np.max(np.abs(step)) <= FRICTION_RTOL * np.max(np.abs(forces)):
+        if np.max(np.abs(step), initial=0.0) <= FRICTION_RTOL * np.max(np.abs(forces), initial=0.0):
             qdd, lam, mu = (part + sum(f * response[k] for f, response in zip(forces, responses))
                             for k, part in enumerate(base[:3]))
             return qdd, lam, mu, base[3]

@@ -170,13 +170,14 @@ def transition(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tup
     m = len(y) // 2
     old = modes
     current = variant_of(modes)
-    nu = _multipliers(current, t, y)
     records = friction_records(current, t, y[:m], y[m:])
     rates = [float(record["J"] @ y[m:]) for record in records]
     new = list(modes)
     found: dict[int, tuple[float, float]] = {}  # (holding force, r mu_s N) by joint, for the events
-    for j in triggered:  # held joints whose holding force reached r mu_s N: slide along it
-        if modes[j] == MODE_HELD:
+    slipping = [j for j in triggered if modes[j] == MODE_HELD]  # holding force reached r mu_s N: slide along it
+    if slipping:  # (the multipliers cost a forward dynamics: only where a hold is read)
+        nu = _multipliers(current, t, y)
+        for j in slipping:
             force = float(nu[int(records[j]["hold_row"])])
             new[j] = 1 if force > 0 else -1
             found[j] = (force, sticking_limit(records[j], nu))

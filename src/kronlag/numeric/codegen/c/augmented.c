@@ -105,15 +105,16 @@ static double kronlag_perpendicular(const double *v, const double *u)
     return sqrt(sum);
 }
 
-/* One joint's wrench W lambda_J (6: force, couple) at the multipliers lam. */
+/* One joint's wrench W lambda_J (6: force, couple) at the multipliers lam (the joint's own rows only:
+ * a planar pin has 2 of the 6). */
 static void kronlag_friction_wrench(const double *record, const double *lam, double *wrench)
 {
     const double *W = record + KRONLAG_M, *rows = W + 36;
-    double own[6];
-    for (int j = 0; j < 6; ++j) own[j] = rows[j] >= 0.0 ? lam[(int)rows[j]] : 0.0;
-    for (int i = 0; i < 6; ++i) {
-        wrench[i] = 0.0;
-        for (int j = 0; j < 6; ++j) wrench[i] += W[i * 6 + j] * own[j];
+    for (int i = 0; i < 6; ++i) wrench[i] = 0.0;
+    for (int j = 0; j < 6; ++j) {
+        if (rows[j] < 0.0) continue;
+        double own = lam[(int)rows[j]];
+        for (int i = 0; i < 6; ++i) wrench[i] += W[i * 6 + j] * own;
     }
 }
 
@@ -176,7 +177,10 @@ static int kronlag_small_solve(double *A, double *b, int n)
 /* The solve with the friction of the joints: the solution is linear in h, so the responses to a
  * unit friction force of each joint (the forcing -J_j, right-hand sides sharing the factorization)
  * give the solution for any friction forces f, and f = phi(lambda(f)) is found by Newton steps
- * to KRONLAG_FRICTION_RTOL.  Returns 0, 1 (singular) or 2 (the friction forces did not converge). */
+ * to KRONLAG_FRICTION_RTOL.  A joint whose force is zero whatever the load (held by its stick row:
+ * r mu and c count nothing; or r mu(v) = 0 and no viscous term) needs no response: only the others
+ * are unknowns (a linkage at rest in all its pins costs one right-hand side, as without friction).
+ * Returns 0, 1 (singular) or 2 (the friction forces did not converge). */
 /* The friction forces of the last solve in this thread: the next one starts its Newton steps there (an
  * integrator's evaluations follow each other closely: a step or two instead of four or five from
  * zero), and from zero again should they not converge from there. */
@@ -187,82 +191,88 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
 {
     enum { m = KRONLAG_M, k = KRONLAG_K, nf = KRONLAG_FRICTION, size = KRONLAG_FRICTION_RECORD };
     double records[nf * size + 1], forcing[nf * m], accelerations[(nf + 1) * m], multipliers[(nf + 1) * (k + 1)];
-    double rates[nf], forces[nf];
+    double rates[nf], forces[nf], factor[nf], viscous[nf];
+    int active[nf], na = 0;  /* the joints whose force can be nonzero: the unknowns */
     kronlag_friction(t, q, qd, p, records);
     for (int j = 0; j < nf; ++j) {
-        const double *J = records + j * size;
-        rates[j] = 0.0;
-        forces[j] = kronlag_friction_last[j];
-        for (int i = 0; i < m; ++i) { forcing[j * m + i] = -J[i]; rates[j] += J[i] * qd[i]; }
-    }
-    int status = kronlag_solve_many(terms, qd, alpha, beta, max_rank, nf + 1, forcing, accelerations, multipliers,
-                                    rank);
-    if (status) return status;
-    const double *dqdd = accelerations + m, *dnu = multipliers + (k + 1);
-    /* per joint j: its wrench without friction and per unit friction force of joint i (linear in f),
-     * the factor r mu(v_j) and the viscous force: each step is then a few flops a joint */
-    double wrench[nf][6], response[nf][nf][6], factor[nf], viscous[nf];
-    for (int j = 0; j < nf; ++j) {
         const double *record = records + j * size;
-        kronlag_friction_wrench(record, multipliers, wrench[j]);
-        for (int i = 0; i < nf; ++i) kronlag_friction_wrench(record, dnu + i * (k + 1), response[j][i]);
+        rates[j] = 0.0;
+        for (int i = 0; i < m; ++i) rates[j] += record[i] * qd[i];
         factor[j] = kronlag_friction_coefficient(record, rates[j]);
         viscous[j] = (int)KRONLAG_FRICTION_FIELDS(record)[8] == KRONLAG_MODE_HELD ? 0.0
                      : KRONLAG_FRICTION_FIELDS(record)[2] * rates[j];
+        if (factor[j] == 0.0 && viscous[j] == 0.0) continue;
+        for (int i = 0; i < m; ++i) forcing[na * m + i] = -record[i];
+        forces[na] = kronlag_friction_last[j];
+        active[na++] = j;
+    }
+    int status = kronlag_solve_many(terms, qd, alpha, beta, max_rank, na + 1, forcing, accelerations, multipliers,
+                                    rank);
+    if (status) return status;
+    const double *dqdd = accelerations + m, *dnu = multipliers + (k + 1);
+    /* per unknown c (joint active[c]): its wrench without friction and per unit friction force of the
+     * unknown d (linear in f), so that each step is a few flops a joint */
+    double wrench[nf][6], response[nf][nf][6];
+    for (int c = 0; c < na; ++c) {
+        const double *record = records + active[c] * size;
+        kronlag_friction_wrench(record, multipliers, wrench[c]);
+        for (int d = 0; d < na; ++d) kronlag_friction_wrench(record, dnu + d * (k + 1), response[c][d]);
     }
     /* Newton steps on g(f) = f - r mu N(f) - c v = 0 (N(f) piecewise linear in f: its derivative is the
-     * unit direction of the force and couple parts times their responses), from f = 0 */
+     * unit direction of the force and couple parts times their responses), from the last forces */
     int converged = 0;
     for (int step = 0; step < 2 * KRONLAG_FRICTION_MAX_ITERATIONS && !converged; ++step) {
         if (step == KRONLAG_FRICTION_MAX_ITERATIONS)  /* not from the last forces: from zero */
-            for (int j = 0; j < nf; ++j) forces[j] = 0.0;
-        double jacobian[nf * nf], residual[nf];
-        for (int j = 0; j < nf; ++j) {
+            for (int c = 0; c < na; ++c) forces[c] = 0.0;
+        double jacobian[nf * nf + 1], residual[nf + 1];
+        for (int c = 0; c < na; ++c) {
+            int j = active[c];
             const double *record = records + j * size, *u_force = record + m + 42, *u_couple = u_force + 3;
             double total[6], direction[6];
             for (int a = 0; a < 6; ++a) {
-                total[a] = wrench[j][a];
-                for (int i = 0; i < nf; ++i) total[a] += forces[i] * response[j][i][a];
+                total[a] = wrench[c][a];
+                for (int d = 0; d < na; ++d) total[a] += forces[d] * response[c][d][a];
             }
-            residual[j] = forces[j] - factor[j] * kronlag_friction_load(record, total) - viscous[j];
+            residual[c] = forces[c] - factor[j] * kronlag_friction_load(record, total) - viscous[j];
             /* d|p|/dw = p / |p| with p = w - (w.u) u (p is perpendicular to u), zero where p = 0 */
             for (int part = 0; part < 2; ++part) {
                 const double *w = total + 3 * part, *u = part ? u_couple : u_force;
                 double along = w[0] * u[0] + w[1] * u[1] + w[2] * u[2];
                 double weight = part ? KRONLAG_FRICTION_FIELDS(record)[5] : 1.0, norm = 0.0;
-                double *d = direction + 3 * part;
-                for (int a = 0; a < 3; ++a) { d[a] = w[a] - along * u[a]; norm += d[a] * d[a]; }
+                double *e = direction + 3 * part;
+                for (int a = 0; a < 3; ++a) { e[a] = w[a] - along * u[a]; norm += e[a] * e[a]; }
                 norm = sqrt(norm);
-                for (int a = 0; a < 3; ++a) d[a] = norm > 0.0 ? weight * d[a] / norm : 0.0;
+                for (int a = 0; a < 3; ++a) e[a] = norm > 0.0 ? weight * e[a] / norm : 0.0;
             }
-            for (int i = 0; i < nf; ++i) {
+            for (int d = 0; d < na; ++d) {
                 double slope = 0.0;
-                for (int a = 0; a < 6; ++a) slope += direction[a] * response[j][i][a];
-                jacobian[j * nf + i] = (i == j) - factor[j] * slope;
+                for (int a = 0; a < 6; ++a) slope += direction[a] * response[c][d][a];
+                jacobian[c * na + d] = (c == d) - factor[j] * slope;
             }
         }
-        if (kronlag_small_solve(jacobian, residual, nf)) {
+        if (kronlag_small_solve(jacobian, residual, na)) {
             if (step >= KRONLAG_FRICTION_MAX_ITERATIONS) return 2;
             step = KRONLAG_FRICTION_MAX_ITERATIONS - 1;  /* from zero */
             continue;
         }
         double change = 0.0, largest = 0.0;
-        for (int j = 0; j < nf; ++j) {
-            forces[j] -= residual[j];
-            change = fmax(change, fabs(residual[j]));
-            largest = fmax(largest, fabs(forces[j]));
+        for (int c = 0; c < na; ++c) {
+            forces[c] -= residual[c];
+            change = fmax(change, fabs(residual[c]));
+            largest = fmax(largest, fabs(forces[c]));
         }
         converged = change <= KRONLAG_FRICTION_RTOL * largest;
     }
     if (!converged) return 2;
-    memcpy(kronlag_friction_last, forces, sizeof forces);
+    for (int j = 0; j < nf; ++j) kronlag_friction_last[j] = 0.0;
+    for (int c = 0; c < na; ++c) kronlag_friction_last[active[c]] = forces[c];
     for (int i = 0; i < m; ++i) {
         qdd[i] = accelerations[i];
-        for (int j = 0; j < nf; ++j) qdd[i] += forces[j] * dqdd[j * m + i];
+        for (int c = 0; c < na; ++c) qdd[i] += forces[c] * dqdd[c * m + i];
     }
     for (int i = 0; i < k; ++i) {
         nu[i] = multipliers[i];
-        for (int j = 0; j < nf; ++j) nu[i] += forces[j] * dnu[j * (k + 1) + i];
+        for (int c = 0; c < na; ++c) nu[i] += forces[c] * dnu[c * (k + 1) + i];
     }
     return 0;
 }
