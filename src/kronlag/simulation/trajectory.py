@@ -23,7 +23,7 @@ import numpy as np
 
 from ..numeric.friction import friction_columns, friction_joints
 from ..numeric.reactions import Reaction, joint_reaction, reaction_columns
-from .energy import friction_work, nonconservative_work
+from .energy import Segment, friction_work, nonconservative_work
 from .labelled import LabelledArrays, multiplier_columns
 
 if TYPE_CHECKING:
@@ -316,6 +316,11 @@ class Trajectory(ColumnExport):
     intervals : tuple of MethodInterval
         Which integrator ran over which interval and why, in time order (one interval unless the
         switching method changed integrators, e.g. ALI3-P near a singular configuration).
+    segments : tuple of Segment
+        For a run with limits or exact stiction: its pieces between events, in order, each with the
+        model integrated there (contacts and sticking joints held, sliding directions) and its number
+        of outputs, so that :attr:`nonconservative_work` uses the friction that acted
+        (:class:`~kronlag.simulation.energy.Segment`); empty when ``model`` ran throughout.
 
     Notes
     -----
@@ -356,6 +361,7 @@ class Trajectory(ColumnExport):
     friction_held: np.ndarray | None = None
     inputs: dict[str, np.ndarray] = field(default_factory=dict)
     intervals: tuple[MethodInterval, ...] = ()
+    segments: tuple[Segment, ...] = ()
 
     @property
     def status(self) -> int:
@@ -377,13 +383,14 @@ class Trajectory(ColumnExport):
         """``W(t) = integral qd^T (f_Q - Phi_q^T lambda - A^T mu) dt`` from ``t[0]``: the work of applied
         forces and torques, dampers, generalized forces, joint friction and drives, shape (N,); see
         :mod:`kronlag.simulation.energy`."""
-        return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd, inputs=self.inputs)
+        return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd, inputs=self.inputs,
+                                    segments=self.segments)
 
     @cached_property
     def friction_work(self) -> np.ndarray:
         """``integral Q_f . qd dt`` from ``t[0]``: the work of the joints' friction (negative: energy lost),
         shape (N,), part of :attr:`nonconservative_work`; zeros without friction (:mod:`kronlag.model.friction`)."""
-        return friction_work(self.model, self.t, self.q, self.qd, self.qdd)
+        return friction_work(self.model, self.t, self.q, self.qd, self.qdd, segments=self.segments)
 
     @property
     def energy_balance(self) -> np.ndarray:
