@@ -8,57 +8,29 @@ import re
 
 import pytest
 import sympy as sp
-from helpers import PIN_FRICTION_PENDULUM_VALUES, pin_friction_pendulum_file
+from helpers import PIN_FRICTION_PENDULUM_VALUES, pin_friction_pendulum_file, rod_on_a_stop_file
 
 from kronlag.core.errors import ModelFileError
 from kronlag.model.modelfile import loads_model
 
-#: A bar on a pin (angle th) with a stop on th and a slider (coordinate s along x) with a stop on s.
-STOPS_FILE = """
-name = "stops"
-coordinates = ["x", "y", "th", "s"]
-gravity = [0, "-g"]
-
-[parameters]
-m = {value = 2.0, unit = "kg"}
-L = {value = 0.9, unit = "m"}
-g = {value = 9.81, unit = "m/s^2"}
-
-[[bodies]]
-name = "bar"
-type = "planar"
-mass = "m"
-inertia = "m*L**2/12"
-position = ["x", "y"]
-angle = "th"
-
+#: The rod on a pin with its stop on th, and a slider (coordinate s along x) with a stop ``end`` on s.
+STOPS_FILE = rod_on_a_stop_file(name="stops", tables="""
 [[bodies]]
 name = "slider"
 type = "point"
 mass = "m"
 position = ["s", 0]
 
-[[joints]]
-name = "pivot"
-type = "revolute"
-body_a = "ground"
-body_b = "bar"
-at_b = ["-L/2", 0]
-
-[[limits]]
-name = "stop"
-expression = "th"
-lower = LOWER
-
 [[limits]]
 name = "end"
 expression = "s"
 upper = UPPER
-"""
+""").replace('coordinates = ["x", "y", "th"]', 'coordinates = ["x", "y", "th", "s"]')
 
 
 def _stops(lower='"-pi/2"', upper="0.25"):
-    return loads_model(STOPS_FILE.replace("LOWER", lower).replace("UPPER", upper), source="stops.toml")
+    text = STOPS_FILE.replace('lower = "-pi/2"', f"lower = {lower}").replace("UPPER", upper)
+    return loads_model(text, source="stops.toml")
 
 
 def _friction(friction: str):
