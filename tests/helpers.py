@@ -398,3 +398,34 @@ def pin_friction_pendulum(**friction):
     system.add_joint("revolute", "ground", "bar", at_b=(-L / 2, 0), name="pivot",
                      friction=kronlag.Friction(kinetic=mu, radius=r, **friction))
     return system
+
+
+# -- a mass on a line under a sampled PID of its model file (tests of controllers, of the energy balance) --
+
+#: ``m xdd = u``, u from the file's PID on x (setpoint 0.5 m, period 0.02 s), for 2 s.
+MASS_ON_A_LINE = """
+name = "mass_on_a_line"
+coordinates = ["x"]
+[parameters]
+m = {value = 2.0, unit = "kg"}
+u = {value = 0.0, unit = "N"}
+[[bodies]]
+name = "block"
+type = "point"
+mass = "m"
+position = ["x", 0]
+[[forces]]
+point = ["x", 0]
+force = ["u", 0]
+[controller]
+type = "pid"
+input = "u"
+coordinate = "x"
+setpoint = 0.5
+kp = {value = 8, unit = "N/m"}
+ki = 4.0
+kd = {value = 3, unit = "N*s/m"}
+period = 0.02
+[simulation]
+t_end = 2.0
+"""

@@ -10,7 +10,6 @@ import re
 import numpy as np
 import pytest
 import sympy as sp
-
 from helpers import rod_on_a_stop_file
 
 import kronlag

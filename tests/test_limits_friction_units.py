@@ -8,7 +8,11 @@ import re
 
 import pytest
 import sympy as sp
-from helpers import PIN_FRICTION_PENDULUM_VALUES, pin_friction_pendulum_file, rod_on_a_stop_file
+from helpers import (
+    PIN_FRICTION_PENDULUM_VALUES,
+    pin_friction_pendulum_file,
+    rod_on_a_stop_file,
+)
 
 from kronlag.core.errors import ModelFileError
 from kronlag.model.modelfile import loads_model
@@ -63,13 +67,13 @@ def test_friction_quantities_with_units_are_converted_to_si():
 
 @pytest.mark.parametrize(("change", "message"), [
     # a limit on an angle given in metres, and on a length in seconds
-    (dict(lower='{value = -1, unit = "m"}'),
+    ({"lower": '{value = -1, unit = "m"}'},
      "stops.toml: limits[0].lower.unit: 'm' is a length, but the limit's expression th is dimensionless"),
-    (dict(upper='{value = 1, unit = "s"}'),
+    ({"upper": '{value = 1, unit = "s"}'},
      "stops.toml: limits[1].upper.unit: 's' is a time, but the limit's expression s is a length"),
-    (dict(lower='{value = -90, unit = "wibbles"}'), "stops.toml: limits[0].lower.unit: unknown unit"),
-    (dict(lower='{value = -90}'), "stops.toml: limits[0].lower: missing field 'unit'"),
-    (dict(lower='{value = "-L", unit = "deg"}'),
+    ({"lower": '{value = -90, unit = "wibbles"}'}, "stops.toml: limits[0].lower.unit: unknown unit"),
+    ({"lower": '{value = -90}'}, "stops.toml: limits[0].lower: missing field 'unit'"),
+    ({"lower": '{value = "-L", unit = "deg"}'},
      "stops.toml: limits[0].lower.value: a value computed from other parameters uses their SI values"),
 ])
 def test_a_limit_bound_with_a_wrong_unit_is_a_located_error(change, message):
@@ -81,8 +85,8 @@ def test_a_limit_bound_with_a_wrong_unit_is_a_located_error(change, message):
     ('{kinetic = 0.1, radius = {value = 2, unit = "s"}}',
      "joints[0].friction.radius.unit: 's' is a time, but the friction radius of a revolute joint is a length"),
     ('{kinetic = 0.1, radius = 0.01, viscous = {value = 1, unit = "N*s/m"}}',
-     "joints[0].friction.viscous.unit: 'N*s/m' is a damping coefficient (mass/time), but the friction viscous "
-     "of a revolute joint is a quantity of dimension mass*length^2/time"),
+     ("joints[0].friction.viscous.unit: 'N*s/m' is a damping coefficient (mass/time), but the friction viscous "
+      "of a revolute joint is a quantity of dimension mass*length^2/time")),
     ('{kinetic = {value = 0.1, unit = "m"}, radius = 0.01}',
      "joints[0].friction.kinetic.unit: 'm' is a length, but the friction kinetic of a revolute joint is dimensionless"),
     ('{kinetic = 0.1, radius = 0.01, preload = {value = 1, unit = "kg"}}',

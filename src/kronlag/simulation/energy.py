@@ -23,13 +23,17 @@ an impact's jump of the kinetic energy is no work, and shows in ``E - E(0) - W``
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
+from ..core.errors import KronlagWarning
 from ..numeric.friction import friction_columns, friction_joints
 from ..numeric.numeric_model import NumericModel
+from ..numeric.tolerances import SAME_INSTANT
 
 __all__ = ["Segment", "friction_work", "nonconservative_work"]
 
@@ -59,8 +63,11 @@ class Segment:
     end: tuple[float, np.ndarray] | None = None
 
 
-#: ``power(k, model, t, q, qd)``: a power at a state, ``k`` the output row whose inputs it uses.
-Power = Callable[[int, NumericModel, float, np.ndarray, np.ndarray], float]
+#: ``power(model, t, q, qd)``: a power at a state.
+Power = Callable[[NumericModel, float, np.ndarray, np.ndarray], float]
+#: ``with_inputs(row, model, t)``: ``model`` with a controller's inputs at time ``t`` as they were set at (or
+#: held from) output ``row``.
+WithInputs = Callable[[int, NumericModel, float], NumericModel]
 
 
 def _friction_power(model: NumericModel, t: float, q: np.ndarray, qd: np.ndarray) -> float:
@@ -80,7 +87,8 @@ def _power(model: NumericModel, t: float, q: np.ndarray, qd: np.ndarray) -> floa
     return float(qd @ forces) + _friction_power(model, t, q, qd)
 
 
-def nonconservative_work(model, t, q, qd, qdd, *, inputs=None, segments: Sequence[Segment] = ()) -> np.ndarray:
+def nonconservative_work(model, t, q, qd, qdd, *, inputs=None, segments: Sequence[Segment] = (),
+                         sample_times=None) -> np.ndarray:
     """``W(t_k) = integral_{t_0}^{t_k} P dt`` along a sampled motion, shape (N,).
 
     The power ``P = qd^T f_Q``, plus that of the constraint forces
@@ -96,33 +104,43 @@ def nonconservative_work(model, t, q, qd, qdd, *, inputs=None, segments: Sequenc
     t : (N,)
     q, qd, qdd : (N, m)
     inputs : dict of str to (N,), optional
-        Parameter values at the samples set by a controller (``Trajectory.inputs``): the power at
-        sample ``k`` uses them (held over the central difference; a sampled controller's jumps
-        between samples are not resolved).
+        Parameter values at the samples set by a controller (``Trajectory.inputs``).  A continuous
+        controller's change along the motion is their rate between the outputs (second-order
+        differences); a sampled one's (``sample_times`` given) are held from each sample instant
+        to the next, exactly where the instants are outputs (every step is output), and a
+        :class:`~kronlag.core.errors.KronlagWarning` says when some are not (``t_eval``).
     segments : sequence of Segment, optional
         The pieces of a run with events (limits, exact stiction), in order, covering the samples:
         each piece's power with its own model, from its start to its end (module docstring).
         Empty: one piece of ``model``.
+    sample_times : (S,), optional
+        The instants a sampled controller took its samples (``Trajectory.sample_times``).
     """
     t = np.asarray(t, dtype=float)
     if len(t) == 0:
         return np.zeros(0)
-    if inputs:
-        names = list(model.parameter_names)
-        index = [names.index(name) for name in inputs]
-        values = np.column_stack([inputs[name] for name in inputs])
-        held: dict[tuple[int, int], NumericModel] = {}
+    if not inputs:
+        return _segmented_work(_power, model, t, q, qd, qdd, segments)
+    names = list(model.parameter_names)
+    index = [names.index(name) for name in inputs]
+    values = np.column_stack([inputs[name] for name in inputs])
+    breaks = None if sample_times is None else _sample_rows(t, np.asarray(sample_times, dtype=float))
+    rates = _input_rates(t, values, _pieces(model, len(t), segments)) if breaks is None else np.zeros_like(values)
 
-        def controlled(k: int, piece: NumericModel, time: float, x: np.ndarray, v: np.ndarray) -> float:
-            if (id(piece), k) not in held:  # the piece's model with the inputs of output k
-                parameters = piece.parameter_vector()
-                parameters[index] = values[k]
-                held.clear()
-                held[id(piece), k] = piece.with_parameters(dict(zip(names, parameters)))
-            return _power(held[id(piece), k], time, x, v)
+    held: dict[tuple[int, int], NumericModel] = {}  # sampled: the last part's model (its inputs do not vary)
 
-        return _segmented_work(controlled, model, t, q, qd, qdd, segments)
-    return _segmented_work(lambda k, piece, *state: _power(piece, *state), model, t, q, qd, qdd, segments)
+    def with_inputs(row: int, piece: NumericModel, time: float) -> NumericModel:
+        if breaks is not None and (id(piece), row) in held:
+            return held[id(piece), row]
+        parameters = piece.parameter_vector()
+        parameters[index] = values[row] + (time - t[row]) * rates[row]
+        variant = piece.with_parameters(dict(zip(names, parameters)))
+        if breaks is not None:
+            held.clear()
+            held[id(piece), row] = variant
+        return variant
+
+    return _segmented_work(_power, model, t, q, qd, qdd, segments, with_inputs, breaks)
 
 
 def friction_work(model, t, q, qd, qdd, *, segments: Sequence[Segment] = ()) -> np.ndarray:
@@ -131,43 +149,94 @@ def friction_work(model, t, q, qd, qdd, *, segments: Sequence[Segment] = ()) -> 
     t = np.asarray(t, dtype=float)
     if len(t) == 0 or not friction_joints(model.equations.system):
         return np.zeros(len(t))
-    return _segmented_work(lambda k, piece, *state: _friction_power(piece, *state), model, t, q, qd, qdd, segments)
+    return _segmented_work(_friction_power, model, t, q, qd, qdd, segments)
 
 
-def _segmented_work(power_of: Power, model: NumericModel, t: np.ndarray, q, qd, qdd,
-                    segments: Sequence[Segment]) -> np.ndarray:
-    """``integral P dt`` at the outputs from ``t[0]``, piece by piece (:class:`Segment`): over each piece
-    from its start to its end with its model (the start and end added where no output is there, as
-    with ``t_eval``), the work carried over from one piece to the next."""
-    q, qd, qdd = (np.asarray(x, dtype=float) for x in (q, qd, qdd))
-    pieces = segments or (Segment(model, len(t)),)
-    if sum(piece.outputs for piece in pieces) != len(t):
-        raise ValueError(f"the segments hold {sum(piece.outputs for piece in pieces)} outputs, not {len(t)}")
-    work, carried, first = np.empty(len(t)), 0.0, 0
+def _pieces(model: NumericModel, outputs: int, segments: Sequence[Segment]) -> Sequence[Segment]:
+    pieces = segments or (Segment(model, outputs),)
+    if sum(piece.outputs for piece in pieces) != outputs:
+        raise ValueError(f"the segments hold {sum(piece.outputs for piece in pieces)} outputs, not {outputs}")
+    return pieces
+
+
+def _input_rates(t: np.ndarray, values: np.ndarray, pieces: Sequence[Segment]) -> np.ndarray:
+    """``du/dt`` of a continuous controller's inputs at the outputs: second-order differences over the
+    outputs of each piece between events (first-order in a piece of two, zero in a piece of one)."""
+    rates, first = np.zeros_like(values), 0
     for piece in pieces:
         last = first + piece.outputs
-        rows = list(range(first, last))
-        times, states, rates = list(t[first:last]), list(q[first:last]), list(qd[first:last])
-        accelerations = list(qdd[first:last])
-        lead = piece.start is not None and (not rows or piece.start[0] < t[first])
-        tail = piece.end is not None and (not rows or piece.end[0] > t[last - 1])
-        for add, where, row in ((lead, 0, min(first, len(t) - 1)), (tail, len(times), max(last - 1, 0))):
-            if not add:
-                continue
-            time, y = piece.start if where == 0 else piece.end
-            m = len(y) // 2
-            times.insert(where, time)
-            states.insert(where, y[:m])
-            rates.insert(where, y[m:])
-            accelerations.insert(where, piece.model.forward_dynamics(y[:m], y[m:], time).qdd)
-            rows.insert(where, row)
-        if times:
-            local = _work(lambda k, *state: power_of(rows[k], piece.model, *state), np.array(times),
-                          np.array(states), np.array(rates), np.array(accelerations))
-            work[first:last] = carried + local[int(lead):int(lead) + piece.outputs]
-            carried += local[-1]
+        # and between outputs repeated at one time (a change of integrator), where the inputs may jump
+        cuts = [first, *(first + 1 + np.flatnonzero(np.diff(t[first:last]) == 0)), last]
+        for low, high in pairwise(cuts):
+            if high - low > 1:
+                rates[low:high] = np.gradient(values[low:high], t[low:high], axis=0, edge_order=2 if high - low > 2 else 1)
+        first = last
+    return rates
+
+
+def _sample_rows(t: np.ndarray, sample_times: np.ndarray) -> list[int]:
+    """The output rows at a sampled controller's sample instants (within :data:`SAME_INSTANT`), where its
+    held inputs change; a warning for the instants inside the outputs' span that no output is at."""
+    if len(t) < 2:
+        return []
+    tolerance = SAME_INSTANT * np.maximum(1.0, np.abs(sample_times))
+    nearest = np.clip(np.searchsorted(t, sample_times), 1, len(t) - 1)
+    closest = np.where(np.abs(t[nearest - 1] - sample_times) <= np.abs(t[nearest] - sample_times),
+                       nearest - 1, nearest)
+    found = np.abs(t[closest] - sample_times) <= tolerance
+    inside = (sample_times > t[0]) & (sample_times < t[-1])
+    missed = int(np.count_nonzero(inside & ~found))
+    if missed:
+        warnings.warn(f"energy balance: {missed} of the controller's sample instants fall between outputs (t_eval), "
+                      "where its held inputs jump: the work W is approximate there; output every step (t_eval=None) "
+                      "or at the sample instants for an exact balance", KronlagWarning, stacklevel=4)
+    return sorted({int(row) for row in closest[found]})
+
+
+def _segmented_work(power: Power, model: NumericModel, t: np.ndarray, q, qd, qdd, segments: Sequence[Segment],
+                    with_inputs: WithInputs | None = None, breaks: Sequence[int] | None = None) -> np.ndarray:
+    """``integral P dt`` at the outputs from ``t[0]``, piece by piece (:class:`Segment`): over each piece
+    from its start to its end with its model (the start and end added where no output is there, as
+    with ``t_eval``), the work carried over from one piece to the next.  ``with_inputs``: a controller's
+    inputs at each point; ``breaks``: the output rows where held inputs change (a sampled controller's
+    instants), each piece cut there, the inputs of each part those of its first row (and the acceleration
+    at its last row the one they gave); None: every row's own inputs."""
+    q, qd, qdd = (np.asarray(x, dtype=float) for x in (q, qd, qdd))
+    work, carried, first = np.empty(len(t)), 0.0, 0
+    for piece in _pieces(model, len(t), segments):
+        last = first + piece.outputs
+        cuts = [first] + [row for row in breaks or () if first < row < last - 1] + [last - 1]
+        for part, (low, high) in enumerate(pairwise(cuts) if piece.outputs > 1 else [(first, last - 1)]):
+            rows = list(range(low, high + 1)) if piece.outputs else []
+            lead = part == 0 and piece.start is not None and (not rows or piece.start[0] < t[first])
+            tail = high == last - 1 and piece.end is not None and (not rows or piece.end[0] > t[last - 1])
+            points = [(t[row], q[row], qd[row], qdd[row]) for row in rows]
+            if breaks is not None and piece.outputs:
+                rows = [low] * len(rows)  # held from the part's first output
+                if high in breaks and high > low:  # where the next inputs act: the acceleration of these
+                    held = _model_at(with_inputs, low, piece.model, t[high])
+                    points[-1] = (*points[-1][:3], held.forward_dynamics(q[high], qd[high], t[high]).qdd)
+            for add, where, row in ((lead, 0, min(first, len(t) - 1)), (tail, len(points), max(last - 1, 0))):
+                if add:
+                    time, y = piece.start if where == 0 else piece.end
+                    m = len(y) // 2
+                    acting = _model_at(with_inputs, low if breaks is not None else row, piece.model, time)
+                    points.insert(where, (time, y[:m], y[m:], acting.forward_dynamics(y[:m], y[m:], time).qdd))
+                    rows.insert(where, low if breaks is not None else row)
+            if points:
+                def power_at(k, time, x, v, rows=rows, model=piece.model):
+                    return power(_model_at(with_inputs, rows[k], model, time), time, x, v)
+
+                local = _work(power_at, *(np.array(column) for column in zip(*points)))
+                count = high - low + 1 if piece.outputs else 0
+                work[low:low + count] = carried + local[int(lead):int(lead) + count]
+                carried += local[-1]
         first = last
     return work - work[0]
+
+
+def _model_at(with_inputs: WithInputs | None, row: int, model: NumericModel, time: float) -> NumericModel:
+    return model if with_inputs is None else with_inputs(row, model, time)
 
 
 def _work(power_of: Callable[..., float], t: np.ndarray, q, qd, qdd) -> np.ndarray:

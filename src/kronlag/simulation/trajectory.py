@@ -321,6 +321,10 @@ class Trajectory(ColumnExport):
         model integrated there (contacts and sticking joints held, sliding directions) and its number
         of outputs, so that :attr:`nonconservative_work` uses the friction that acted
         (:class:`~kronlag.simulation.energy.Segment`); empty when ``model`` ran throughout.
+    sample_times : (S,) or None
+        Under a :class:`~kronlag.simulation.controllers.Sampled` controller, the instants it took its
+        samples (its inputs held from each to the next, as :attr:`nonconservative_work` integrates them);
+        else None.
 
     Notes
     -----
@@ -362,6 +366,7 @@ class Trajectory(ColumnExport):
     inputs: dict[str, np.ndarray] = field(default_factory=dict)
     intervals: tuple[MethodInterval, ...] = ()
     segments: tuple[Segment, ...] = ()
+    sample_times: np.ndarray | None = None
 
     @property
     def status(self) -> int:
@@ -384,7 +389,7 @@ class Trajectory(ColumnExport):
         forces and torques, dampers, generalized forces, joint friction and drives, shape (N,); see
         :mod:`kronlag.simulation.energy`."""
         return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd, inputs=self.inputs,
-                                    segments=self.segments)
+                                    segments=self.segments, sample_times=self.sample_times)
 
     @cached_property
     def friction_work(self) -> np.ndarray:
