@@ -35,7 +35,7 @@ from ..numeric.friction import friction_columns, friction_joints
 from ..numeric.numeric_model import NumericModel
 from ..numeric.tolerances import SAME_INSTANT
 
-__all__ = ["Segment", "friction_work", "nonconservative_work"]
+__all__ = ["Segment", "event_energy", "friction_work", "nonconservative_work"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,6 +150,26 @@ def friction_work(model, t, q, qd, qdd, *, segments: Sequence[Segment] = ()) -> 
     if len(t) == 0 or not friction_joints(model.equations.system):
         return np.zeros(len(t))
     return _segmented_work(_friction_power, model, t, q, qd, qdd, segments)
+
+
+def event_energy(model, t, segments: Sequence[Segment] = ()) -> np.ndarray:
+    """The change of the total energy ``E = T + Pi`` at the events of a run (the jump of the state from
+    a segment's end to the next one's start: an impact's loss, the rate a sticking joint is held at), summed
+    up to each output, shape (N,); zeros for a run without events.  ``E - E0 - W - event_energy`` is the
+    integration's own drift."""
+    jumps, first = np.zeros(len(t)), 0
+    for piece, following in zip(segments, segments[1:]):
+        first += piece.outputs
+        if piece.end is None or following.start is None:
+            continue
+        (t_end, before), (t_start, after) = piece.end, following.start
+        jumps[first:] += _total_energy(model, t_start, after) - _total_energy(model, t_end, before)
+    return jumps
+
+
+def _total_energy(model: NumericModel, t: float, y: np.ndarray) -> float:
+    m = len(y) // 2
+    return float(model.kinetic_energy(y[:m], y[m:], t) + model.potential_energy(y[:m], t))
 
 
 def _pieces(model: NumericModel, outputs: int, segments: Sequence[Segment]) -> Sequence[Segment]:

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..numeric.friction import friction_columns, friction_joints
 from ..numeric.reactions import Reaction, joint_reaction, reaction_columns
-from .energy import Segment, friction_work, nonconservative_work
+from .energy import Segment, event_energy, friction_work, nonconservative_work
 from .labelled import LabelledArrays, multiplier_columns
 
 if TYPE_CHECKING:
@@ -400,9 +400,23 @@ class Trajectory(ColumnExport):
     @property
     def energy_balance(self) -> np.ndarray:
         """``E(t) - E(t0) - W(t)``, shape (N,): zero up to the integration error, also for driven and
-        damped models (``E = T + Pi``)."""
+        damped models (``E = T + Pi``), but for what the events changed (:attr:`event_energy`: the
+        impacts' losses)."""
         energy = self.total_energy
         return energy - energy[:1] - self.nonconservative_work
+
+    @cached_property
+    def event_energy(self) -> np.ndarray:
+        """The change of ``E = T + Pi`` at the run's events up to each output (the impacts' losses,
+        <= 0), shape (N,); zeros without limits or exact stiction.  ``energy_balance - event_energy`` is
+        the integration's drift; see :func:`kronlag.simulation.energy.event_energy`."""
+        return event_energy(self.model, self.t, self.segments)
+
+    @property
+    def energy_drift(self) -> np.ndarray:
+        """``E(t) - E(t0) - W(t)`` less :attr:`event_energy`, shape (N,): the integration's energy error,
+        zero up to it with impacts too."""
+        return self.energy_balance - self.event_energy
 
     def __len__(self) -> int:
         return len(self.t)
