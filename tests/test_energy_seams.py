@@ -111,6 +111,10 @@ def test_a_cart_stuck_on_its_rail_loads_the_pin_as_a_fixed_pivot():
     held = trajectory.friction_held[:, 0]
     assert np.all(np.isfinite(held)) and np.max(np.abs(held)) > 5.0  # held throughout, and loaded
     assert np.all(np.isnan(trajectory.friction_held[:, 1]))  # the pin slides throughout
+    # its friction column is r mu N against its rate at every output, the first (rate still 0) included
+    columns = trajectory.columns()
+    np.testing.assert_allclose(columns["pin.friction"], -RADIUS * MU * columns["pin.normal_load"], rtol=1e-12)
+    np.testing.assert_allclose(columns["rail.friction"], held, rtol=1e-12)
     _check_fixed_pivot_swing(trajectory)
 
 

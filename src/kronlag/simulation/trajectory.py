@@ -450,8 +450,22 @@ class Trajectory(ColumnExport):
             sides = [side.name for limit in self.model.equations.system.limits for side in limit.sides]
             columns.update({f"{side}.force": self.limit_forces[:, i] for i, side in enumerate(sides)})
         if friction_joints(self.model.equations.system):  # joint friction: force, normal load and rate by joint
-            columns.update(friction_columns(self.model, self.t, self.q, self.qd, self.lam, self.friction_held))
+            columns.update(self.friction_columns())
         return columns
+
+    def friction_columns(self) -> dict[str, np.ndarray]:
+        """Per joint with friction, ``<joint>.friction``, ``<joint>.normal_load`` and ``<joint>.rate``, and
+        ``friction_power``, each (N,) (:func:`kronlag.numeric.friction.friction_columns`): the friction that
+        acted, segment by segment with each one's model (a joint that slips at an output where its rate is
+        still zero slides in its segment's direction; a held one's is its holding force)."""
+        pieces = [piece for piece in self.segments if piece.outputs] or [Segment(self.model, len(self.t))]
+        parts, first = [], 0
+        for piece in pieces:
+            rows = slice(first, first + piece.outputs)
+            held = None if self.friction_held is None else self.friction_held[rows]
+            parts.append(friction_columns(piece.model, self.t[rows], self.q[rows], self.qd[rows], self.lam[rows], held))
+            first = rows.stop
+        return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
 
     def reaction(self, name: str, *, frame: str = "world") -> Reaction:
         """The reaction of joint ``name`` at every output time: the force (N, d) and couple
