@@ -323,29 +323,23 @@ def double_parallelogram() -> kronlag.System:
 DOUBLE_PARALLELOGRAM_VALUES = dict(l=0.7, d=1.3, m=1.2, m_c=2.5, J=0.09, J_c=0.6, g=9.81)
 
 
-# -- a bar swinging on a pin with friction (tests/test_friction.py, tests/test_stiction.py) ------------
-
-#: Its parameter values: mass, length, gravity, friction coefficient and pin radius.
-PIN_FRICTION_PENDULUM_VALUES = {"m": 2.0, "L": 0.9, "g": 9.81, "mu": 0.1, "r": 0.01}
+# -- a uniform bar on a pin at one end, as model files (tests of friction, stiction, limits, controllers) -----
 
 
-def pin_friction_pendulum_file(friction: str) -> str:
-    """The model file of a uniform bar (mass ``m``, length ``L``) on a pin at one end, whose joint has
-    ``friction = <friction>`` (a TOML inline table)."""
+def bar_on_a_pin_file(*, name: str, body: str, parameters: str, joint: str = "", tables: str = "") -> str:
+    """The model file of a uniform bar ``body`` (mass ``m``, length ``L``, angle ``th``) on the pin ``pivot``
+    at one end, under gravity ``g``: ``parameters`` the lines of its ``[parameters]`` (``m``, ``L``, ``g``
+    and any other), ``joint`` more lines of the pin's ``[[joints]]`` entry, ``tables`` more tables."""
     return f"""
-name = "pendulum"
+name = "{name}"
 coordinates = ["x", "y", "th"]
 gravity = [0, "-g"]
 
 [parameters]
-m = {{value = 2.0, unit = "kg"}}
-L = {{value = 0.9, unit = "m"}}
-g = {{value = 9.81, unit = "m/s^2"}}
-mu = 0.1
-r = {{value = 0.01, unit = "m"}}
+{parameters.strip()}
 
 [[bodies]]
-name = "bar"
+name = "{body}"
 type = "planar"
 mass = "m"
 inertia = "m*L**2/12"
@@ -356,10 +350,44 @@ angle = "th"
 name = "pivot"
 type = "revolute"
 body_a = "ground"
-body_b = "bar"
+body_b = "{body}"
 at_b = ["-L/2", 0]
-friction = {friction}
-"""
+{joint.strip()}
+{tables}"""
+
+
+#: The pin-friction pendulum's parameter values: mass, length, gravity, friction coefficient and pin radius.
+PIN_FRICTION_PENDULUM_VALUES = {"m": 2.0, "L": 0.9, "g": 9.81, "mu": 0.1, "r": 0.01}
+
+
+def pin_friction_pendulum_file(friction: str) -> str:
+    """The model file of a uniform bar (mass ``m``, length ``L``) on a pin at one end, whose joint has
+    ``friction = <friction>`` (a TOML inline table)."""
+    return bar_on_a_pin_file(name="pendulum", body="bar", joint=f"friction = {friction}", parameters="""
+m = {value = 2.0, unit = "kg"}
+L = {value = 0.9, unit = "m"}
+g = {value = 9.81, unit = "m/s^2"}
+mu = 0.1
+r = {value = 0.01, unit = "m"}
+""")
+
+
+def rod_on_a_stop_file(*, name: str = "pendulum_on_a_stop", parameters: str = "", tables: str = "") -> str:
+    """A uniform rod (2 kg, 800 mm) on a pin at one end with the stop ``th >= -pi/2`` (limit ``stop``,
+    restitution ``e`` = 0.6); ``parameters`` more lines of ``[parameters]``, ``tables`` more tables."""
+    return bar_on_a_pin_file(name=name, body="rod", parameters=f"""
+m = {{value = 2, unit = "kg"}}
+L = {{value = 800, unit = "mm"}}
+g = {{value = 9.81, unit = "m/s^2"}}
+e = {{value = 0.6}}
+{parameters.strip()}
+""", tables=f"""
+[[limits]]
+name = "stop"
+expression = "th"
+lower = "-pi/2"
+restitution = "e"
+{tables}""")
 
 
 def pin_friction_pendulum(**friction):
@@ -370,3 +398,34 @@ def pin_friction_pendulum(**friction):
     system.add_joint("revolute", "ground", "bar", at_b=(-L / 2, 0), name="pivot",
                      friction=kronlag.Friction(kinetic=mu, radius=r, **friction))
     return system
+
+
+# -- a mass on a line under a sampled PID of its model file (tests of controllers, of the energy balance) --
+
+#: ``m xdd = u``, u from the file's PID on x (setpoint 0.5 m, period 0.02 s), for 2 s.
+MASS_ON_A_LINE = """
+name = "mass_on_a_line"
+coordinates = ["x"]
+[parameters]
+m = {value = 2.0, unit = "kg"}
+u = {value = 0.0, unit = "N"}
+[[bodies]]
+name = "block"
+type = "point"
+mass = "m"
+position = ["x", 0]
+[[forces]]
+point = ["x", 0]
+force = ["u", 0]
+[controller]
+type = "pid"
+input = "u"
+coordinate = "x"
+setpoint = 0.5
+kp = {value = 8, unit = "N/m"}
+ki = 4.0
+kd = {value = 3, unit = "N*s/m"}
+period = 0.02
+[simulation]
+t_end = 2.0
+"""

@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 import sympy as sp
+from helpers import rod_on_a_stop_file
 from scipy.integrate import solve_ivp
 
 import kronlag
@@ -150,42 +151,11 @@ def test_an_exception_of_the_controller_after_an_impact_propagates_with_the_run_
 
 # -- a pendulum driven by a sampled PID torque into a stop ----------------------------------------
 
-PENDULUM_FILE = """
-name = "pid_pendulum_on_a_stop"
-coordinates = ["x", "y", "th"]
-gravity = [0, "-g"]
-
-[parameters]
-m = {value = 2, unit = "kg"}
-L = {value = 800, unit = "mm"}
-g = {value = 9.81, unit = "m/s^2"}
-e = {value = 0.6}
-tau = {value = 0, unit = "N*m"}
-
-[[bodies]]
-name = "rod"
-type = "planar"
-mass = "m"
-inertia = "m*L**2/12"
-position = ["x", "y"]
-angle = "th"
-
-[[joints]]
-type = "revolute"
-body_a = "ground"
-body_b = "rod"
-at_b = ["-L/2", 0]
-name = "pivot"
-
+PENDULUM_FILE = rod_on_a_stop_file(name="pid_pendulum_on_a_stop", parameters='tau = {value = 0, unit = "N*m"}',
+                                   tables="""
 [[torques]]
 body = "rod"
 torque = "tau"
-
-[[limits]]
-name = "stop"
-expression = "th"
-lower = "-pi/2"
-restitution = "e"
 
 [controller]
 type = "pid"
@@ -202,7 +172,7 @@ q = {x = 0.4, y = 0, th = 0}
 
 [simulation]
 t_end = 1.0
-"""
+""")
 
 PID = {"kp": 6.0, "ki": 3.0, "kd": 0.4, "setpoint": -2.0, "period": 0.01}
 

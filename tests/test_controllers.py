@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 import sympy as sp
-from helpers import CART_POLE_VALUES, cart_pole_by_joints
+from helpers import CART_POLE_VALUES, MASS_ON_A_LINE, cart_pole_by_joints
 
 import kronlag
 from kronlag.app.cli import main
@@ -199,34 +199,6 @@ def test_sampled_checks_its_arguments():
 
 
 # -- a PID of a model file: the discrete closed loop of a mass on a line, exactly ---------------------
-
-
-MASS_ON_A_LINE = """
-name = "mass_on_a_line"
-coordinates = ["x"]
-[parameters]
-m = {value = 2.0, unit = "kg"}
-u = {value = 0.0, unit = "N"}
-[[bodies]]
-name = "block"
-type = "point"
-mass = "m"
-position = ["x", 0]
-[[forces]]
-point = ["x", 0]
-force = ["u", 0]
-[controller]
-type = "pid"
-input = "u"
-coordinate = "x"
-setpoint = 0.5
-kp = {value = 8, unit = "N/m"}
-ki = 4.0
-kd = {value = 3, unit = "N*s/m"}
-period = 0.02
-[simulation]
-t_end = 2.0
-"""
 
 
 @pytest.mark.parametrize("method", ["ali3p", "compiled", "projection"])

@@ -10,6 +10,7 @@ import re
 import numpy as np
 import pytest
 import sympy as sp
+from helpers import rod_on_a_stop_file
 
 import kronlag
 from kronlag.simulation.trajectory import LimitEvent
@@ -248,38 +249,7 @@ lower = "floor"
 restitution = "e"
 """
 
-PENDULUM_FILE = """
-name = "pendulum_on_a_stop"
-coordinates = ["x", "y", "th"]
-gravity = [0, "-g"]
-
-[parameters]
-m = {value = 2, unit = "kg"}
-L = {value = 800, unit = "mm"}
-g = {value = 9.81, unit = "m/s^2"}
-e = {value = 0.6}
-
-[[bodies]]
-name = "rod"
-type = "planar"
-mass = "m"
-inertia = "m*L**2/12"
-position = ["x", "y"]
-angle = "th"
-
-[[joints]]
-type = "revolute"
-body_a = "ground"
-body_b = "rod"
-at_b = ["-L/2", 0]
-name = "pivot"
-
-[[limits]]
-name = "stop"
-expression = "th"
-lower = "-pi/2"
-restitution = "e"
-"""
+PENDULUM_FILE = rod_on_a_stop_file()
 
 
 def _from_file(tmp_path, text: str) -> kronlag.NumericModel:

@@ -277,13 +277,16 @@ class SimulationSummary:
     position_drift, velocity_drift : float
         ``max |Phi(q)|`` and ``max |[Phi_q qd; A qd + b]|`` over the run.
     energy_drift : float
-        ``max |E(t) - E(0) - W(t)|``: the total energy ``E = T + Pi`` against the work
-        ``W`` of the non-conservative forces (:attr:`Trajectory.energy_balance`), zero up to
-        the integration error for driven and damped models too.
+        ``max |E(t) - E(0) - W(t) - E_events(t)|``: the total energy ``E = T + Pi`` against the work
+        ``W`` of the non-conservative forces and what the events changed (:attr:`Trajectory.energy_drift`),
+        zero up to the integration error for driven and damped models, and with impacts, too.
     relative_energy_drift : float
         ``energy_drift`` over ``max(|E|, |W|)`` (0 if both are 0 throughout).
     work : float
         ``W`` at the last time: the work of applied forces, torques and dampers.
+    event_energy : float
+        The change of ``E`` at the events (:attr:`Trajectory.event_energy`: the impacts' losses) by the
+        last time.
     wall_time : float
         Seconds.
     largest_reactions : tuple of (str, float)
@@ -312,6 +315,7 @@ class SimulationSummary:
     relative_energy_drift: float
     wall_time: float
     work: float = 0.0
+    event_energy: float = 0.0
     largest_reactions: tuple[tuple[str, float], ...] = ()
     limit_events: tuple[tuple[str, int], ...] = ()
     stiction_events: tuple[tuple[str, int], ...] = ()
@@ -327,9 +331,9 @@ class SimulationSummary:
             f"energy drift: {self.energy_drift:.3g} (relative {self.relative_energy_drift:.3g}; "
             f"E(t) - E(0) - W(t) with the work of non-conservative forces W = {self.work:.6g})",
         ]
-        if self.limit_events:  # impacts lose energy: the energy drift above includes it
+        if self.limit_events:  # impacts lose energy: not the integration's drift
             lines.append("limit events: " + ", ".join(f"{count} {kind}" for kind, count in self.limit_events)
-                         + " (the energy drift includes what the impacts dissipate)")
+                         + f" (they changed the energy by {self.event_energy:.6g}, apart from the drift)")
         if self.stiction_events:
             lines.append("stiction events: " + ", ".join(f"{count} {kind}" for kind, count in self.stiction_events))
         lines += [f"  {interval}" for interval in self.intervals]
@@ -347,7 +351,7 @@ def summarize(trajectory: Trajectory) -> SimulationSummary:
     """Steps, constraint and energy drift and wall time of a trajectory."""
     energy = trajectory.total_energy
     work = trajectory.nonconservative_work if energy.size else energy
-    drift = _largest(trajectory.energy_balance) if energy.size else 0.0
+    drift = _largest(trajectory.energy_drift) if energy.size else 0.0
     scale = max(_largest(energy), _largest(work))
     return SimulationSummary(
         success=trajectory.success, message=trajectory.message, method=trajectory.method,
@@ -356,6 +360,7 @@ def summarize(trajectory: Trajectory) -> SimulationSummary:
         position_drift=_largest(trajectory.position_residual), velocity_drift=_largest(trajectory.velocity_residual),
         energy_drift=drift, relative_energy_drift=drift / scale if scale else 0.0, wall_time=trajectory.wall_time,
         work=float(work[-1]) if work.size else 0.0,
+        event_energy=float(trajectory.event_energy[-1]) if energy.size else 0.0,
         largest_reactions=tuple((joint.name, _largest(np.linalg.norm(trajectory.reaction(joint.name).force, axis=1)))
                                 for joint in trajectory.model.equations.system.joints) if len(trajectory.t) else (),
         limit_events=_limit_events(trajectory), stiction_events=_stiction_events(trajectory),

@@ -12,26 +12,74 @@ where ``W`` is the work of the non-conservative forces (applied forces and
 torques, dampers, generalized forces, joint friction) and of the drives.  ``E - E(0) - W`` is
 the true energy drift of an integration, for driven and damped models as well
 as conservative ones.
+
+A run with limits or exact stiction is a sequence of segments (:mod:`.impacts`), each integrated
+with its own model: the contacts held as constraints, the sticking joints held by their rows, the
+sliding joints' friction in a fixed direction.  The joints' friction depends on the multipliers of
+that model (the normal loads), so the work of each segment is computed with the model that was
+integrated there (:class:`Segment`), from the state where it began to the state where it ended;
+an impact's jump of the kinetic energy is no work, and shows in ``E - E(0) - W`` as the loss it is.
 """
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from itertools import pairwise
+
 import numpy as np
 
+from ..core.errors import KronlagWarning
 from ..numeric.friction import friction_columns, friction_joints
+from ..numeric.numeric_model import NumericModel
+from ..numeric.tolerances import SAME_INSTANT
 
-__all__ = ["friction_work", "nonconservative_work"]
+__all__ = ["Segment", "event_energy", "friction_work", "nonconservative_work"]
 
 
-def _friction_power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:
-    """``Q_f . qd = -sum_j f_j v_j``, the power of the joints' friction (:mod:`kronlag.model.friction`)."""
+@dataclass(frozen=True, eq=False)
+class Segment:
+    """A piece of a run integrated with one model (:attr:`Trajectory.segments
+    <kronlag.simulation.trajectory.Trajectory.segments>`).
+
+    Attributes
+    ----------
+    model : NumericModel
+        The model integrated over the piece (with limits: its held contacts as constraints; with exact
+        stiction: its held joints' rows and sliding directions), without a controller.
+    outputs : int
+        How many consecutive output rows of the trajectory the piece gave (0: none fell in it).
+    start : (float, (2 m,)) or None
+        ``(t, [q, qd])`` where the piece began (after an event's jump and projection).
+    end : (float, (2 m,)) or None
+        ``(t, [q, qd])`` where it ended at an event, before the event changed the state; None for the
+        run's last piece (it ends at its last output).
+    """
+
+    model: NumericModel
+    outputs: int
+    start: tuple[float, np.ndarray] | None = None
+    end: tuple[float, np.ndarray] | None = None
+
+
+#: ``power(model, t, q, qd)``: a power at a state.
+Power = Callable[[NumericModel, float, np.ndarray, np.ndarray], float]
+#: ``with_inputs(row, model, t)``: ``model`` with a controller's inputs at time ``t`` as they were set at (or
+#: held from) output ``row``.
+WithInputs = Callable[[int, NumericModel, float], NumericModel]
+
+
+def _friction_power(model: NumericModel, t: float, q: np.ndarray, qd: np.ndarray) -> float:
+    """``Q_f . qd = -sum_j f_j v_j``, the power of the joints' friction (:mod:`kronlag.model.friction`)
+    with the multipliers of ``model`` (a segment's: its held contacts and joints load the joints)."""
     if not friction_joints(model.equations.system):
         return 0.0
     lam = model.forward_dynamics(q, qd, t).lam
     return float(friction_columns(model, t, q, qd, lam)["friction_power"][0])
 
 
-def _power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:
+def _power(model: NumericModel, t: float, q: np.ndarray, qd: np.ndarray) -> float:
     forces = model.f_Q(q, qd, t)
     if model.equations.constraints_do_work:
         result = model.forward_dynamics(q, qd, t)
@@ -39,7 +87,8 @@ def _power(model, t: float, q: np.ndarray, qd: np.ndarray) -> float:
     return float(qd @ forces) + _friction_power(model, t, q, qd)
 
 
-def nonconservative_work(model, t, q, qd, qdd, *, inputs=None) -> np.ndarray:
+def nonconservative_work(model, t, q, qd, qdd, *, inputs=None, segments: Sequence[Segment] = (),
+                         sample_times=None) -> np.ndarray:
     """``W(t_k) = integral_{t_0}^{t_k} P dt`` along a sampled motion, shape (N,).
 
     The power ``P = qd^T f_Q``, plus that of the constraint forces
@@ -55,36 +104,171 @@ def nonconservative_work(model, t, q, qd, qdd, *, inputs=None) -> np.ndarray:
     t : (N,)
     q, qd, qdd : (N, m)
     inputs : dict of str to (N,), optional
-        Parameter values at the samples set by a controller (``Trajectory.inputs``): the power at
-        sample ``k`` uses them (held over the central difference; a sampled controller's jumps
-        between samples are not resolved).
+        Parameter values at the samples set by a controller (``Trajectory.inputs``).  A continuous
+        controller's change along the motion is their rate between the outputs (second-order
+        differences); a sampled one's (``sample_times`` given) are held from each sample instant
+        to the next, exactly where the instants are outputs (every step is output), and a
+        :class:`~kronlag.core.errors.KronlagWarning` says when some are not (``t_eval``).
+    segments : sequence of Segment, optional
+        The pieces of a run with events (limits, exact stiction), in order, covering the samples:
+        each piece's power with its own model, from its start to its end (module docstring).
+        Empty: one piece of ``model``.
+    sample_times : (S,), optional
+        The instants a sampled controller took its samples (``Trajectory.sample_times``).
     """
     t = np.asarray(t, dtype=float)
     if len(t) == 0:
         return np.zeros(0)
-    if inputs:
-        power, rate = _controlled_power(model, t, q, qd, qdd, inputs)
-        return _integrated(t, power, rate)
-    return _work(_power, model, t, q, qd, qdd)
+    if not inputs:
+        return _segmented_work(_power, model, t, q, qd, qdd, segments)
+    names = list(model.parameter_names)
+    index = [names.index(name) for name in inputs]
+    values = np.column_stack([inputs[name] for name in inputs])
+    breaks = None if sample_times is None else _sample_rows(t, np.asarray(sample_times, dtype=float))
+    rates = _input_rates(t, values, _pieces(model, len(t), segments)) if breaks is None else np.zeros_like(values)
+
+    held: dict[tuple[int, int], NumericModel] = {}  # sampled: the last part's model (its inputs do not vary)
+
+    def with_inputs(row: int, piece: NumericModel, time: float) -> NumericModel:
+        if breaks is not None and (id(piece), row) in held:
+            return held[id(piece), row]
+        parameters = piece.parameter_vector()
+        parameters[index] = values[row] + (time - t[row]) * rates[row]
+        variant = piece.with_parameters(dict(zip(names, parameters)))
+        if breaks is not None:
+            held.clear()
+            held[id(piece), row] = variant
+        return variant
+
+    return _segmented_work(_power, model, t, q, qd, qdd, segments, with_inputs, breaks)
 
 
-def friction_work(model, t, q, qd, qdd) -> np.ndarray:
+def friction_work(model, t, q, qd, qdd, *, segments: Sequence[Segment] = ()) -> np.ndarray:
     """The work of the joints' friction ``integral Q_f . qd dt`` from ``t[0]`` (<= 0 but for a preload
     pushing a joint along), by the rule of :func:`nonconservative_work`, shape (N,); zeros without friction."""
     t = np.asarray(t, dtype=float)
     if len(t) == 0 or not friction_joints(model.equations.system):
         return np.zeros(len(t))
-    return _work(_friction_power, model, t, q, qd, qdd)
+    return _segmented_work(_friction_power, model, t, q, qd, qdd, segments)
 
 
-def _work(power_of, model, t: np.ndarray, q, qd, qdd) -> np.ndarray:
-    """``integral power_of(model, t, q, qd) dt`` over the samples (:func:`_integrated`)."""
-    power = np.array([power_of(model, *state) for state in zip(t, q, qd)])
-    scale = np.max(np.diff(t)) if len(t) > 1 else 1.0
-    step = 1e-6 * scale
+def event_energy(model, t, segments: Sequence[Segment] = ()) -> np.ndarray:
+    """The change of the total energy ``E = T + Pi`` at the events of a run (the jump of the state from
+    a segment's end to the next one's start: an impact's loss, the rate a sticking joint is held at), summed
+    up to each output, shape (N,); zeros for a run without events.  ``E - E0 - W - event_energy`` is the
+    integration's own drift."""
+    jumps, first = np.zeros(len(t)), 0
+    for piece, following in zip(segments, segments[1:]):
+        first += piece.outputs
+        if piece.end is None or following.start is None:
+            continue
+        (t_end, before), (t_start, after) = piece.end, following.start
+        jumps[first:] += _total_energy(model, t_start, after) - _total_energy(model, t_end, before)
+    return jumps
+
+
+def _total_energy(model: NumericModel, t: float, y: np.ndarray) -> float:
+    m = len(y) // 2
+    return float(model.kinetic_energy(y[:m], y[m:], t) + model.potential_energy(y[:m], t))
+
+
+def _pieces(model: NumericModel, outputs: int, segments: Sequence[Segment]) -> Sequence[Segment]:
+    pieces = segments or (Segment(model, outputs),)
+    if sum(piece.outputs for piece in pieces) != outputs:
+        raise ValueError(f"the segments hold {sum(piece.outputs for piece in pieces)} outputs, not {outputs}")
+    return pieces
+
+
+def _input_rates(t: np.ndarray, values: np.ndarray, pieces: Sequence[Segment]) -> np.ndarray:
+    """``du/dt`` of a continuous controller's inputs at the outputs: second-order differences over the
+    outputs of each piece between events (first-order in a piece of two, zero in a piece of one)."""
+    rates, first = np.zeros_like(values), 0
+    for piece in pieces:
+        last = first + piece.outputs
+        # and between outputs repeated at one time (a change of integrator), where the inputs may jump
+        cuts = [first, *(first + 1 + np.flatnonzero(np.diff(t[first:last]) == 0)), last]
+        for low, high in pairwise(cuts):
+            if high - low > 1:
+                rates[low:high] = np.gradient(values[low:high], t[low:high], axis=0, edge_order=2 if high - low > 2 else 1)
+        first = last
+    return rates
+
+
+def _sample_rows(t: np.ndarray, sample_times: np.ndarray) -> list[int]:
+    """The output rows at a sampled controller's sample instants (within :data:`SAME_INSTANT`), where its
+    held inputs change; a warning for the instants inside the outputs' span that no output is at."""
+    if len(t) < 2:
+        return []
+    tolerance = SAME_INSTANT * np.maximum(1.0, np.abs(sample_times))
+    nearest = np.clip(np.searchsorted(t, sample_times), 1, len(t) - 1)
+    closest = np.where(np.abs(t[nearest - 1] - sample_times) <= np.abs(t[nearest] - sample_times),
+                       nearest - 1, nearest)
+    found = np.abs(t[closest] - sample_times) <= tolerance
+    inside = (sample_times > t[0]) & (sample_times < t[-1])
+    missed = int(np.count_nonzero(inside & ~found))
+    if missed:
+        warnings.warn(f"energy balance: {missed} of the controller's sample instants fall between outputs (t_eval), "
+                      "where its held inputs jump: the work W is approximate there; output every step (t_eval=None) "
+                      "or at the sample instants for an exact balance", KronlagWarning, stacklevel=4)
+    return sorted({int(row) for row in closest[found]})
+
+
+def _segmented_work(power: Power, model: NumericModel, t: np.ndarray, q, qd, qdd, segments: Sequence[Segment],
+                    with_inputs: WithInputs | None = None, breaks: Sequence[int] | None = None) -> np.ndarray:
+    """``integral P dt`` at the outputs from ``t[0]``, piece by piece (:class:`Segment`): over each piece
+    from its start to its end with its model (the start and end added where no output is there, as
+    with ``t_eval``), the work carried over from one piece to the next.  ``with_inputs``: a controller's
+    inputs at each point; ``breaks``: the output rows where held inputs change (a sampled controller's
+    instants), each piece cut there, the inputs of each part those of its first row (and the acceleration
+    at its last row the one they gave); None: every row's own inputs."""
+    q, qd, qdd = (np.asarray(x, dtype=float) for x in (q, qd, qdd))
+    work, carried, first = np.empty(len(t)), 0.0, 0
+    for piece in _pieces(model, len(t), segments):
+        last = first + piece.outputs
+        cuts = [first] + [row for row in breaks or () if first < row < last - 1] + [last - 1]
+        for part, (low, high) in enumerate(pairwise(cuts) if piece.outputs > 1 else [(first, last - 1)]):
+            rows = list(range(low, high + 1)) if piece.outputs else []
+            lead = part == 0 and piece.start is not None and (not rows or piece.start[0] < t[first])
+            tail = high == last - 1 and piece.end is not None and (not rows or piece.end[0] > t[last - 1])
+            points = [(t[row], q[row], qd[row], qdd[row]) for row in rows]
+            if breaks is not None and piece.outputs:
+                rows = [low] * len(rows)  # held from the part's first output
+                if high in breaks and high > low:  # where the next inputs act: the acceleration of these
+                    held = _model_at(with_inputs, low, piece.model, t[high])
+                    points[-1] = (*points[-1][:3], held.forward_dynamics(q[high], qd[high], t[high]).qdd)
+            for state, where, row in ((piece.start if lead else None, 0, min(first, len(t) - 1)),
+                                      (piece.end if tail else None, len(points), max(last - 1, 0))):
+                if state is not None:
+                    time, y = state
+                    m = len(y) // 2
+                    acting = _model_at(with_inputs, low if breaks is not None else row, piece.model, time)
+                    points.insert(where, (time, y[:m], y[m:], acting.forward_dynamics(y[:m], y[m:], time).qdd))
+                    rows.insert(where, low if breaks is not None else row)
+            if points:
+                def power_at(k, time, x, v, rows=rows, model=piece.model):
+                    return power(_model_at(with_inputs, rows[k], model, time), time, x, v)
+
+                local = _work(power_at, *(np.array(column) for column in zip(*points)))
+                count = high - low + 1 if piece.outputs else 0
+                work[low:low + count] = carried + local[int(lead):int(lead) + count]
+                carried += local[-1]
+        first = last
+    return work - work[0]
+
+
+def _model_at(with_inputs: WithInputs | None, row: int, model: NumericModel, time: float) -> NumericModel:
+    return model if with_inputs is None else with_inputs(row, model, time)
+
+
+def _work(power_of: Callable[..., float], t: np.ndarray, q, qd, qdd) -> np.ndarray:
+    """``integral power_of(k, t, q, qd) dt`` over the samples (:func:`_integrated`), ``k`` the sample."""
+    if t[-1] == t[0]:  # a single sample, or a segment of no duration (events at one instant)
+        return np.zeros(len(t))
+    power = np.array([power_of(k, *state) for k, state in enumerate(zip(t, q, qd))])
+    step = 1e-6 * np.max(np.diff(t))
 
     def along(k: int, e: float) -> float:
-        return power_of(model, t[k] + e, q[k] + e * qd[k], qd[k] + e * qdd[k])
+        return power_of(k, t[k] + e, q[k] + e * qd[k], qd[k] + e * qdd[k])
 
     # a segment's end (or start) is a sample repeated at one time (an event: an impact, a joint that
     # sticks or reverses, where the power jumps or has a kink), as are the motion's ends: there the
@@ -109,22 +293,3 @@ def _integrated(t: np.ndarray, power: np.ndarray, rate: np.ndarray) -> np.ndarra
     h = np.diff(t)
     increments = h / 2 * (power[:-1] + power[1:]) + h ** 2 / 12 * (rate[:-1] - rate[1:])
     return np.concatenate([[0.0], np.cumsum(increments)])
-
-
-def _controlled_power(model, t, q, qd, qdd, inputs) -> tuple[np.ndarray, np.ndarray]:
-    """The power and its rate (:func:`nonconservative_work`) with the parameters of each sample."""
-    names = list(model.parameter_names)
-    index = [names.index(name) for name in inputs]
-    values = np.column_stack([inputs[name] for name in inputs])
-    base = model.parameter_vector()
-    power, rate = np.empty(len(t)), np.empty(len(t))
-    scale = np.max(np.diff(t)) if len(t) > 1 else 1.0
-    step = 1e-6 * scale
-    for k, (time, x, v, a) in enumerate(zip(t, q, qd, qdd)):
-        parameters = base.copy()
-        parameters[index] = values[k]
-        held = model.with_parameters(dict(zip(names, parameters)))
-        power[k] = _power(held, time, x, v)
-        rate[k] = (_power(held, time + step, x + step * v, v + step * a)
-                   - _power(held, time - step, x - step * v, v - step * a)) / (2 * step)
-    return power, rate

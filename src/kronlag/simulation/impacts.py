@@ -42,6 +42,7 @@ from ..numeric.projection import project_positions
 from ..numeric.tolerances import AT_REST, CONTACT_GAP, RESTING_GAP, SAME_INSTANT
 from ..symbolic.derivation import derive
 from .controllers import ControlledModel, solve_sampled
+from .energy import Segment
 from .problem import MultibodyProblem, Solution, Solver, derived_shapes
 from .stepping import stopped_text
 from .stiction import after_impulse, check_not_stopped_by_contacts, held_forces, start_modes, stiction_model, transition
@@ -144,6 +145,7 @@ class _LimitRun:
         self.events: list = []
         self.intervals: list = []
         self.pieces: list[dict[str, np.ndarray]] = []
+        self.segments: list[Segment] = []
         self._last_impulses: dict[int, float] = {}
         self.first_step = 0.0
         self.loop = self.model.loop if isinstance(self.model, ControlledModel) else None
@@ -190,6 +192,9 @@ class _LimitRun:
             self.intervals += solution.intervals
             if keep and len(solution.t):
                 self._keep(solution, variant)
+            self.segments.append(Segment(variant.uncontrolled if isinstance(variant, ControlledModel) else variant,
+                                         len(solution.t) if keep else 0, (t, y.copy()),
+                                         None if solution.stop is None else (solution.stop.t, solution.stop.y.copy())))
             if solution.result is not Result.LIMIT or solution.stop is None:
                 return self._solution(solution.result, solution.message, steps, nfev, njev)
             same_time = same_time + 1 if last_t is not None and solution.stop.t <= last_t else 0
@@ -384,4 +389,5 @@ class _LimitRun:
         t, y, parameters = joined.pop("t"), joined.pop("y"), joined.pop("parameters", None)
         events = tuple(sorted(self.events, key=lambda event: event.t))
         return Solution(t=t, y=y, result=result, message=message, nfev=nfev, njev=njev, steps=steps,
-                        derived=joined, events=events, parameters=parameters, intervals=tuple(self.intervals))
+                        derived=joined, events=events, parameters=parameters, intervals=tuple(self.intervals),
+                        segments=tuple(self.segments))

@@ -20,6 +20,7 @@ from ..core.errors import ProjectionError
 from ..numeric.projection import project_positions, project_velocities
 from ..numeric.tolerances import integrator_tolerances
 from .control import RunControl
+from .energy import Segment
 from .trajectory import MethodInterval, Result, SingularPassage
 from .watch import LimitStop, LimitWatch
 
@@ -131,6 +132,9 @@ class Solution:
     intervals : tuple of MethodInterval
         Which integrator ran where, when the solver changes integrators (else :func:`simulate`
         records one interval of its method).
+    segments : tuple of Segment
+        A run with events (limits, exact stiction): the model of each piece and its outputs
+        (:class:`~.energy.Segment`); empty for a run of the problem's model throughout.
     """
 
     t: np.ndarray
@@ -145,6 +149,7 @@ class Solution:
     stop: LimitStop | None = None
     parameters: np.ndarray | None = None
     intervals: tuple[MethodInterval, ...] = ()
+    segments: tuple[Segment, ...] = ()
 
     #: The keys of :attr:`derived` (:func:`derived_shapes`).
     DERIVED: ClassVar[tuple[str, ...]] = tuple(derived_shapes(0, 0, 0, 0))

@@ -101,7 +101,9 @@ def _trajectory(solution: Solution, problem: MultibodyProblem, method: str, star
                       njev=solution.njev, steps=solution.steps, wall_time=time.perf_counter() - started,
                       events=solution.events, result=solution.result,
                       inputs=loop.inputs(parameters) if loop is not None else {},
-                      intervals=_intervals(solution, method, problem.t0))
+                      intervals=_intervals(solution, method, problem.t0), segments=solution.segments,
+                      sample_times=(loop.t0 + loop.sampled.period * np.arange(loop.samples)
+                                    if loop is not None and loop.sampled else None))
 
 
 def simulate(model: NumericModel, t_span: tuple[float, float], q0, qd0, *, method: str | type[Solver] = "auto",

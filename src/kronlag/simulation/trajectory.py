@@ -23,7 +23,7 @@ import numpy as np
 
 from ..numeric.friction import friction_columns, friction_joints
 from ..numeric.reactions import Reaction, joint_reaction, reaction_columns
-from .energy import friction_work, nonconservative_work
+from .energy import Segment, event_energy, friction_work, nonconservative_work
 from .labelled import LabelledArrays, multiplier_columns
 
 if TYPE_CHECKING:
@@ -316,6 +316,15 @@ class Trajectory(ColumnExport):
     intervals : tuple of MethodInterval
         Which integrator ran over which interval and why, in time order (one interval unless the
         switching method changed integrators, e.g. ALI3-P near a singular configuration).
+    segments : tuple of Segment
+        For a run with limits or exact stiction: its pieces between events, in order, each with the
+        model integrated there (contacts and sticking joints held, sliding directions) and its number
+        of outputs, so that :attr:`nonconservative_work` uses the friction that acted
+        (:class:`~kronlag.simulation.energy.Segment`); empty when ``model`` ran throughout.
+    sample_times : (S,) or None
+        Under a :class:`~kronlag.simulation.controllers.Sampled` controller, the instants it took its
+        samples (its inputs held from each to the next, as :attr:`nonconservative_work` integrates them);
+        else None.
 
     Notes
     -----
@@ -356,6 +365,8 @@ class Trajectory(ColumnExport):
     friction_held: np.ndarray | None = None
     inputs: dict[str, np.ndarray] = field(default_factory=dict)
     intervals: tuple[MethodInterval, ...] = ()
+    segments: tuple[Segment, ...] = ()
+    sample_times: np.ndarray | None = None
 
     @property
     def status(self) -> int:
@@ -377,20 +388,35 @@ class Trajectory(ColumnExport):
         """``W(t) = integral qd^T (f_Q - Phi_q^T lambda - A^T mu) dt`` from ``t[0]``: the work of applied
         forces and torques, dampers, generalized forces, joint friction and drives, shape (N,); see
         :mod:`kronlag.simulation.energy`."""
-        return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd, inputs=self.inputs)
+        return nonconservative_work(self.model, self.t, self.q, self.qd, self.qdd, inputs=self.inputs,
+                                    segments=self.segments, sample_times=self.sample_times)
 
     @cached_property
     def friction_work(self) -> np.ndarray:
         """``integral Q_f . qd dt`` from ``t[0]``: the work of the joints' friction (negative: energy lost),
         shape (N,), part of :attr:`nonconservative_work`; zeros without friction (:mod:`kronlag.model.friction`)."""
-        return friction_work(self.model, self.t, self.q, self.qd, self.qdd)
+        return friction_work(self.model, self.t, self.q, self.qd, self.qdd, segments=self.segments)
 
     @property
     def energy_balance(self) -> np.ndarray:
         """``E(t) - E(t0) - W(t)``, shape (N,): zero up to the integration error, also for driven and
-        damped models (``E = T + Pi``)."""
+        damped models (``E = T + Pi``), but for what the events changed (:attr:`event_energy`: the
+        impacts' losses)."""
         energy = self.total_energy
         return energy - energy[:1] - self.nonconservative_work
+
+    @cached_property
+    def event_energy(self) -> np.ndarray:
+        """The change of ``E = T + Pi`` at the run's events up to each output (the impacts' losses,
+        <= 0), shape (N,); zeros without limits or exact stiction.  ``energy_balance - event_energy`` is
+        the integration's drift; see :func:`kronlag.simulation.energy.event_energy`."""
+        return event_energy(self.model, self.t, self.segments)
+
+    @property
+    def energy_drift(self) -> np.ndarray:
+        """``E(t) - E(t0) - W(t)`` less :attr:`event_energy`, shape (N,): the integration's energy error,
+        zero up to it with impacts too."""
+        return self.energy_balance - self.event_energy
 
     def __len__(self) -> int:
         return len(self.t)
@@ -424,8 +450,22 @@ class Trajectory(ColumnExport):
             sides = [side.name for limit in self.model.equations.system.limits for side in limit.sides]
             columns.update({f"{side}.force": self.limit_forces[:, i] for i, side in enumerate(sides)})
         if friction_joints(self.model.equations.system):  # joint friction: force, normal load and rate by joint
-            columns.update(friction_columns(self.model, self.t, self.q, self.qd, self.lam, self.friction_held))
+            columns.update(self.friction_columns())
         return columns
+
+    def friction_columns(self) -> dict[str, np.ndarray]:
+        """Per joint with friction, ``<joint>.friction``, ``<joint>.normal_load`` and ``<joint>.rate``, and
+        ``friction_power``, each (N,) (:func:`kronlag.numeric.friction.friction_columns`): the friction that
+        acted, segment by segment with each one's model (a joint that slips at an output where its rate is
+        still zero slides in its segment's direction; a held one's is its holding force)."""
+        pieces = [piece for piece in self.segments if piece.outputs] or [Segment(self.model, len(self.t))]
+        parts, first = [], 0
+        for piece in pieces:
+            rows = slice(first, first + piece.outputs)
+            held = None if self.friction_held is None else self.friction_held[rows]
+            parts.append(friction_columns(piece.model, self.t[rows], self.q[rows], self.qd[rows], self.lam[rows], held))
+            first = rows.stop
+        return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
 
     def reaction(self, name: str, *, frame: str = "world") -> Reaction:
         """The reaction of joint ``name`` at every output time: the force (N, d) and couple

@@ -23,7 +23,7 @@ import sympy as sp
 from sympy.printing.conventions import split_super_sub
 
 from ..core.errors import InputError
-from ..numeric.friction import friction_columns, friction_joints
+from ..numeric.friction import friction_joints
 from ..numeric.reactions import GENERALIZED_FORCE_UNITS, REACTION_UNITS, multiplier_labels
 from ..simulation.labelled import rate_unit
 from ..simulation.trajectory import LimitEvent
@@ -158,7 +158,7 @@ def _energy_drift_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) 
 def _friction_panel(axes: Axes, traj: Trajectory, units: Mapping[str, str]) -> None:
     """Each joint's friction force or torque (against its rate)."""
     joints = friction_joints(traj.model.equations.system)
-    columns = friction_columns(traj.model, traj.t, traj.q, traj.qd, traj.lam, traj.friction_held)
+    columns = traj.friction_columns()
     _plot_series(axes, traj.t, np.column_stack([columns[f"{joint.name}.friction"] for joint in joints]),
                  [joint.name for joint in joints], title="joint friction (force or torque)",
                  ylabel="friction (N or N*m)" if units.get("energy") == "J" else "friction")

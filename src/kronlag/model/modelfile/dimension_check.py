@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from ...core.errors import ModelFileError
 from ..dimensions import Dimension, DimensionCheck, DimensionConflict, Place
+from ..friction import friction_uses
 from ..symbols import speed_symbol
 from .controller import check_controller_dimensions
 from .model_file import ModelFile
@@ -39,6 +40,7 @@ def check_file_dimensions(document: dict, model: ModelFile) -> None:
                 if getattr(limit, key) is not None:
                     check.same(limit.value, getattr(limit, key), Place(f"limits[{i}].{key}", f"limits[{i}].{key}"))
             check.use(limit.restitution, Dimension(), Place(f"limits[{i}].restitution", f"limits[{i}].restitution"))
+        _check_quantity_units(check, document, model)
         coordinates = {q.name: q for q in model.system.coordinates}
         for key, guesses in (("q", model.q_guess), ("qd", model.qd_guess)):
             for name, value in guesses.items():
@@ -51,3 +53,32 @@ def check_file_dimensions(document: dict, model: ModelFile) -> None:
                 check.derived(name, value, text=written, place=Place(entry, f"parameter {name}"))
     except DimensionConflict as conflict:
         raise ModelFileError(f"{model.source}: {conflict.entry}: {conflict.problem}") from None
+
+
+def _check_unit(item: dict, expected: Dimension | None, entry: str, what: str) -> Dimension:
+    """The dimension of the unit of the ``{value, unit}`` table ``item`` (at ``entry``); DimensionConflict at
+    ``ENTRY.unit`` when it is not ``expected``, the dimension of ``what`` (None: not known yet)."""
+    dimension = Dimension(si_unit(item["unit"])[0].dimensionality)
+    if expected is not None and dimension != expected:
+        raise DimensionConflict(f"{entry}.unit", f"{item['unit']!r} is {dimension.describe()}, but {what} is "
+                                                 f"{expected.describe()}")
+    return dimension
+
+
+def _check_quantity_units(check: DimensionCheck, document: dict, model: ModelFile) -> None:
+    """The units of the ``{value, unit}`` tables of limits' bounds (the dimension of the limit's expression,
+    as the file's uses and units determine it; entered as a use where they do not) and of joints' friction
+    quantities (:func:`~kronlag.model.friction.friction_uses`)."""
+    for i, (table, limit) in enumerate(zip(document.get("limits", []), model.system.limits)):
+        for key in ("lower", "upper"):
+            if isinstance(table.get(key), dict):
+                place = Place(f"limits[{i}].{key}.unit", f"limits[{i}].{key}")
+                known = check.solver.value(check.form(limit.value, place))
+                dimension = _check_unit(table[key], known, f"limits[{i}].{key}", f"the limit's expression {limit.value}")
+                check.use(limit.value, dimension, place)
+    for j, (table, joint) in enumerate(zip(document.get("joints", []), model.system.joints)):
+        friction = table.get("friction", {})
+        for key, _, powers in friction_uses(joint):
+            if isinstance(friction.get(key), dict):
+                _check_unit(friction[key], Dimension(powers), f"joints[{j}].friction.{key}",
+                            f"the friction {key} of a {joint.kind} joint")

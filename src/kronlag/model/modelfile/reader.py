@@ -145,6 +145,33 @@ class _Reader:
         expression = parse_expression(value, self.symbols | self.point_symbols, what=f"{self.source}: {entry}")
         return expression.xreplace(self.point_values)
 
+    def unit(self, table: dict, entry: str) -> tuple[float, str]:
+        """``(SI factor, SI unit)`` of the unit ``table["unit"]`` (``entry`` the table's), errors at ``ENTRY.unit``."""
+        try:
+            one, unit = si_unit(self.string(table["unit"], f"{entry}.unit"))
+        except ValueError as error:
+            raise self.error(f"{entry}.unit", str(error)) from None
+        return float(one.magnitude), unit
+
+    def in_si(self, value: sp.Expr, factor: float, unit: str, entry: str) -> sp.Expr:
+        """``value`` (read at ``entry``) written in a unit of SI factor ``factor``, in SI; an expression of the
+        parameters is in SI already (they are), so its unit must be the SI one."""
+        if factor == 1:
+            return value
+        if value.free_symbols:
+            raise self.error(entry, f"a value computed from other parameters uses their SI values, so its unit "
+                                    f"must be the SI unit {unit!r}")
+        return value * sp.Float(factor)
+
+    def quantity(self, value, entry: str) -> sp.Expr:
+        """A number or an expression of the parameters (in SI), or ``{value = ..., unit = "..."}`` converted
+        to SI (the unit's dimension is checked with the file's, :mod:`.dimension_check`)."""
+        if not isinstance(value, dict):
+            return self.expression(value, entry)
+        self.table(value, entry, required=("value", "unit"))
+        factor, unit = self.unit(value, entry)
+        return self.in_si(self.expression(value["value"], f"{entry}.value"), factor, unit, f"{entry}.value")
+
     def vector(self, value, entry: str, lengths: Sequence[int]) -> list[sp.Expr]:
         expected = " or ".join(map(str, lengths))
         if not isinstance(value, list):
@@ -243,11 +270,8 @@ def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
         if isinstance(item, dict):
             reader.table(item, entry, optional=("value", "unit", "description"))
             if "unit" in item:
-                try:
-                    one, units[key] = si_unit(reader.string(item["unit"], f"{entry}.unit"))
-                except ValueError as error:
-                    raise reader.error(f"{entry}.unit", str(error)) from None
-                factor, file_units[key] = one.magnitude, item["unit"]
+                factor, units[key] = reader.unit(item, entry)
+                file_units[key] = item["unit"]
             if "description" in item:
                 reader.string(item["description"], f"{entry}.description")
             if "value" not in item:
@@ -256,12 +280,7 @@ def _read_parameters(reader: _Reader, table: dict, symbols: dict[str, sp.Symbol]
         value = reader.expression(item, entry, symbols)
         if key in {s.name for s in value.free_symbols}:
             raise reader.error(entry, "the value refers to the parameter itself")
-        if factor is not None and factor != 1:
-            if value.free_symbols:
-                raise reader.error(entry, f"a value computed from other parameters uses their SI values, so its "
-                                          f"unit must be the SI unit {units[key]!r}")
-            value = value * sp.Float(factor)
-        values[key] = value
+        values[key] = value if factor is None else reader.in_si(value, factor, units[key], entry)
     return values, units, file_units
 
 
@@ -317,11 +336,13 @@ def _read_items(reader: _Reader, system: System, document: dict) -> None:
 
 
 def _read_limits(reader: _Reader, system: System, document: dict) -> None:
-    """``[[limits]]``: ``expression`` of q bounded by ``lower`` and/or ``upper``, with ``restitution``."""
+    """``[[limits]]``: ``expression`` of q bounded by ``lower`` and/or ``upper`` (expressions or ``{value, unit}``
+    tables), with ``restitution``."""
     for entry, table in reader.tables(document, "limits", required=("expression",),
                                       optional=("name", "lower", "upper", "restitution")):
-        bounds = {key: reader.expression(table[key], f"{entry}.{key}")
-                  for key in ("lower", "upper", "restitution") if key in table}
+        bounds = {key: reader.quantity(table[key], f"{entry}.{key}") for key in ("lower", "upper") if key in table}
+        if "restitution" in table:
+            bounds["restitution"] = reader.expression(table["restitution"], f"{entry}.restitution")
         if "lower" not in bounds and "upper" not in bounds:
             raise reader.error(entry, "give lower, upper or both")
         expression = reader.expression(table["expression"], f"{entry}.expression")
@@ -371,10 +392,10 @@ def _read_joints(reader: _Reader, system: System, document: dict) -> None:
 
 def _read_friction(reader: _Reader, value, entry: str) -> Friction:
     """A joint's ``friction = {kinetic = ..., ...}``: the fields of :class:`Friction`, expressions of the
-    parameters (``law`` a string)."""
+    parameters or ``{value, unit}`` tables (``law`` a string)."""
     quantities = [field for field in FRICTION_FIELDS if field not in ("kinetic", "law")]
     table = reader.table(value, entry, required=("kinetic",), optional=(*quantities, "law"))
-    options: dict[str, Any] = {key: reader.expression(item, f"{entry}.{key}") for key, item in table.items()
+    options: dict[str, Any] = {key: reader.quantity(item, f"{entry}.{key}") for key, item in table.items()
                                if key != "law"}
     if "law" in table:
         options["law"] = reader.string(table["law"], f"{entry}.law")
