@@ -1,4 +1,4 @@
-"""Speed of friction and sampled control (issue 18, item 5): what the faster paths must keep doing.
+"""The faster paths of friction and sampled control keep their results: what each shortcut must still do.
 
 No wall-clock assertions: the work saved is counted instead (Jacobians CVODE forms under a sampled
 controller, right-hand sides the friction solve needs), and the results are checked against the
