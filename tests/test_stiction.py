@@ -284,3 +284,94 @@ def test_an_impact_that_turns_a_sliding_joint_reverses_its_friction():
     taken = sum(0.5 * inertia * (event.speed_before ** 2 - event.speed_after ** 2) for event in impacts)
     lost = trajectory.total_energy[0] - trajectory.total_energy[-1]
     np.testing.assert_allclose(lost, -trajectory.friction_work[-1] + taken, rtol=0, atol=1e-7)
+
+
+# -- a locked pair: two pins geared together -----------------------------------------------------------
+
+BAR_MASS, BAR_LENGTH, WHEEL_MASS, WHEEL_DISTANCE = 1.0, 1.0, 10.0, 2.0
+BAR_PIN, WHEEL_PIN, MU_S, MU_K = 0.01, 0.05, 0.5, 0.4
+
+
+def _geared_bar(angle: float):
+    """A bar (mass 1, length 1) on a pin at one end at the origin, geared to a balanced wheel (mass 10) on a pin
+    at its centre ``(2, 0)`` by ``th_wheel = -th_bar`` (a constraint on the angles: pure torques, no load on
+    the pins); both pins with the exact law (mu_s 0.5, mu_k 0.4; radii 0.01 and 0.05).  Held at ``angle``
+    above the horizontal and released at rest: ``(model, trajectory or the error)``."""
+    m1, m2, L, g = sp.symbols("m1 m2 L g")
+    system = mechanism([free_body("bar", mass=m1, inertia=m1 * L ** 2 / 12),
+                        free_body("wheel", mass=m2, inertia=m2 / 8)], parameters=[m1, m2, L, g], gravity=(0, -g))
+    friction = dict(static=MU_S, kinetic=MU_K, law="exact")
+    system.add_joint("revolute", "ground", "bar", at_b=(-L / 2, 0), name="bar pin",
+                     friction=kronlag.Friction(radius=BAR_PIN, **friction))
+    system.add_joint("revolute", "ground", "wheel", at_a=(WHEEL_DISTANCE, 0), name="wheel pin",
+                     friction=kronlag.Friction(radius=WHEEL_PIN, **friction))
+    bar_angle, wheel_angle = system.coordinates[2], system.coordinates[5]
+    system.add_constraint(wheel_angle + bar_angle, name="gear")
+    model = kronlag.derive(system).numeric({"m1": BAR_MASS, "m2": WHEEL_MASS, "L": BAR_LENGTH, "g": G})
+    names = model.coordinate_names
+    q, qd = model.assemble([BAR_LENGTH / 2 * np.cos(angle), BAR_LENGTH / 2 * np.sin(angle), angle,
+                            WHEEL_DISTANCE, 0, -angle], fixed={names[2]: angle})
+    return model, q, qd
+
+
+def _geared_thresholds() -> tuple[float, float]:
+    """At rest the pins carry the weights (N = m g each: the gear's multiplier is a pair of torques) and the
+    bar needs the holding torque tau = m1 g L/2 cos(angle) about its pin; the wheel pin's rate is minus the
+    bar pin's, so its friction counts one for one.  The group holds iff tau <= r1 mu_s m1 g + r2 mu_s m2 g;
+    the wheel pin alone holds it iff tau <= r2 mu_s m2 g.  Returned: the two torques."""
+    alone = WHEEL_PIN * MU_S * WHEEL_MASS * G
+    return alone, alone + BAR_PIN * MU_S * BAR_MASS * G
+
+
+def _torque(angle: float) -> float:
+    return BAR_MASS * G * BAR_LENGTH / 2 * np.cos(angle)
+
+
+def test_a_locked_pair_held_by_one_pin_sticks_with_that_pin_holding_it():
+    """tau just below the wheel pin's own capacity (the bar pin's own is 20 times too small): the geared pair
+    sticks at the start and stays; the wheel pin holds tau (its friction column), the bar pin, locked to it,
+    carries nothing, and no event is spurious (one 'stick' per pin at t0)."""
+    alone, _ = _geared_thresholds()
+    angle = np.arccos(0.98 * alone / (BAR_MASS * G * BAR_LENGTH / 2))
+    model, q, qd = _geared_bar(angle)
+    trajectory = kronlag.simulate(model, (0, 1.0), q, qd, rtol=1e-10, atol=1e-12)
+    assert trajectory.success, trajectory.message
+    events = _stiction_events(trajectory)
+    assert sorted((event.joint, event.kind, event.t) for event in events) == [
+        ("bar pin", "stick", 0.0), ("wheel pin", "stick", 0.0)]
+    np.testing.assert_allclose(trajectory.q - q, 0.0, atol=1e-12)
+    columns = trajectory.columns()
+    np.testing.assert_allclose(np.abs(columns["wheel pin.friction"]), _torque(angle), rtol=1e-9)
+    np.testing.assert_allclose(columns["wheel pin.normal_load"], WHEEL_MASS * G, rtol=1e-9)
+    np.testing.assert_allclose(columns["bar pin.friction"], 0.0, atol=1e-12)
+
+
+def test_a_locked_pair_beyond_the_combined_capacity_slips_as_a_whole():
+    """tau 2 % above the combined capacity: both pins slip at t0 together (directions from the motion: the
+    bar falls, th_bar decreasing, the wheel turning the other way) and the energy lost is the friction work."""
+    _, combined = _geared_thresholds()
+    angle = np.arccos(1.02 * combined / (BAR_MASS * G * BAR_LENGTH / 2))
+    model, q, qd = _geared_bar(angle)
+    trajectory = kronlag.simulate(model, (0, 0.3), q, qd, rtol=1e-10, atol=1e-12)
+    assert trajectory.success, trajectory.message
+    events = _stiction_events(trajectory)
+    assert sorted((event.joint, event.kind, event.t) for event in events) == [
+        ("bar pin", "slip", 0.0), ("wheel pin", "slip", 0.0)]
+    assert trajectory.q[-1, 2] < angle - 1e-3 and trajectory.q[-1, 5] > -angle + 1e-3
+    columns = trajectory.columns()
+    assert np.all(columns["bar pin.rate"][1:] < 0) and np.all(columns["wheel pin.rate"][1:] > 0)
+    lost = trajectory.total_energy[0] - trajectory.total_energy
+    assert lost[-1] > 1e-3
+    np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)
+
+
+def test_a_locked_pair_between_one_pins_capacity_and_the_groups_is_refused():
+    """tau between the wheel pin's own capacity and the combined one: it sticks only if the holding torque is
+    divided between the pins, which the segments cannot watch: the run stops naming the pins, t, q and the
+    smooth law (before, it held both pins redundantly with a minimum-norm division)."""
+    alone, combined = _geared_thresholds()
+    angle = np.arccos((alone + combined) / 2 / (BAR_MASS * G * BAR_LENGTH / 2))
+    model, q, qd = _geared_bar(angle)
+    with pytest.raises(kronlag.NumericalError, match=r"exact stiction at t = 0, q = .*'bar pin', 'wheel pin' "
+                                                      r"are locked together.*law='smooth'"):
+        kronlag.simulate(model, (0, 0.3), q, qd, rtol=1e-10, atol=1e-12)
