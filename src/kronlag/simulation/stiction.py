@@ -22,7 +22,9 @@ The rule at the start: a joint whose rate is within :data:`~kronlag.numeric.tole
 ``atol`` of zero is at rest and decided as a joint that has just stopped (all such joints held
 together: each sticks if its holding force is within ``r mu_s N``, else slides in that force's
 direction); any other slides in the direction of its rate.  Joints that stop at one instant are
-decided together in the same way.  Each transition is a :class:`~.trajectory.StictionEvent` in
+decided together in the same way.  A joint whose rate the holds make zero for every allowed motion is
+*locked* to them (:data:`MODE_LOCKED`, no force of its own, no events) and its group is decided as a
+whole (:func:`_decide`); where that takes dividing the holding force among the group, a run refuses.  Each transition is a :class:`~.trajectory.StictionEvent` in
 ``trajectory.events``.
 """
 
@@ -250,8 +252,9 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
                 continue
             ratios = _ratios(base, [rows[h] for h in holds], rows[i])
             tied = [holds[k] for k, ratio in enumerate(ratios) if abs(ratio) > 1e-9 * np.max(np.abs(ratios))]
-            if len(tied) != 1 or tied[0] not in groups:
-                raise _refuse(names, [i] + tied, t, y, "the joint's rate is tied to several held joints")
+            if len(tied) != 1 or tied[0] not in groups:  # several holds, or one decided before it stopped
+                raise _refuse(names, [i] + tied, t, y, f"the rate of {names[i]!r} is tied to held joints "
+                              "that do not stop with it alone")
             groups[tied[0]].append((i, float(ratios[holds.index(tied[0])])))
         for h, members in groups.items():
             force, threshold = found[h] = holding[h]
