@@ -263,15 +263,41 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
             if holder is not None:
                 for i in [h] + [i for i, _ in members]:
                     new[i], found[i] = (MODE_HELD, holder[1]) if i == holder[0] else (MODE_LOCKED, (0.0, holder[2][i][1]))
-            elif abs(force) > capacity:
+            elif abs(force) > capacity and _slides_as_whole(variant_of, trial, h, members, force, t, y):
                 new[h] = 1 if force > 0 else -1
                 for i, ratio in members:
                     new[i], found[i] = int(np.sign(ratio)) * new[h], holding[i]
             else:
                 raise _refuse(names, [h] + [i for i, _ in members], t, y,
                               f"the holding force {force:.6g} of {names[h]!r} exceeds its own r mu_s N "
-                              f"{threshold:.6g} but not the group's {capacity:.6g}")
+                              f"{threshold:.6g} but not surely the group's ({capacity:.6g} with the loads "
+                              "without the others' friction)")
     return tuple(_consistent(variant_of, new, t, y, rest)), found
+
+
+def _slides_as_whole(variant_of: Callable[[tuple[int, ...]], NumericModel], trial: tuple[int, ...], hold: int,
+                     members: list[tuple[int, float]], force: float, t: float, y: np.ndarray) -> bool:
+    """Whether the group ``hold`` + ``members`` (joint, rate ratio) cannot stick even with every locked joint
+    at its full static friction against the motion that would start: ``hold`` held in a model where the
+    members slide that way (their ``r mu_k N`` and the loads it causes solved together, the friction
+    fixed point) still needs more than its own ``r mu_s N`` plus the members' spare ``r (mu_s - mu_k) N``.
+    (The group's capacity from the loads without the members' friction is the first estimate; this one
+    counts how their friction changes the loads, so both must agree for a slip.)"""
+    m = len(y) // 2
+    sign = 1 if force > 0 else -1
+    modes = list(trial)
+    for i, ratio in members:
+        modes[i] = int(np.sign(ratio)) * sign
+    variant = variant_of(tuple(modes))
+    try:
+        nu = _multipliers(variant, t, y)
+    except NumericalError:
+        return False  # no fixed point: not a slip it can vouch for (the caller refuses)
+    records = friction_records(variant, t, y[:m], y[m:])
+    spare = sum(abs(ratio) * sticking_limit(records[i], nu) * (1 - records[i]["kinetic"] / records[i]["static"])
+                for i, ratio in members  # (with a Stribeck term the law already gives mu_s at rest)
+                if records[i]["static"] > 0 and records[i]["stribeck_velocity"] <= 0)
+    return sign * float(nu[int(records[hold]["hold_row"])]) > sticking_limit(records[hold], nu) + spare
 
 
 def _holder(variant_of: Callable[[tuple[int, ...]], NumericModel], trial: tuple[int, ...], hold: int,
