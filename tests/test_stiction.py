@@ -4,6 +4,7 @@ API and model files, on the default method with friction (compiled CVODE) and th
 from __future__ import annotations
 
 import copy
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -221,27 +222,41 @@ def test_exact_law_is_written_to_model_files_and_read_back(tmp_path):
     assert friction.law == "exact" and str(friction.static) == "mu_s" and str(friction.kinetic) == "mu_k"
 
 
-def test_four_bar_with_exact_friction_in_every_pin_rubs_against_every_rate(tmp_path):
-    """The four-bar of examples/four_bar_friction.toml with the exact law in its four pins: the pins'
-    relative rotations reverse while the linkage moves (kinematic dead points: 'reverse' events, not
-    stops) and the whole linkage reverses at once (redundant holds); each joint's friction opposes its
-    rate at every output (friction power <= 0) and the energy lost is the friction work (to 1e-8 J: the
-    power's jumps at the events are integrated from each segment's side)."""
+def _exact_example(name: str, tmp_path):
+    """``examples/<name>.toml`` with the exact law in every joint: ``(model, q0, qd0)``."""
     from kronlag.app.workflows import initial_state, numeric_model
 
-    text = Path("examples/four_bar_friction.toml").read_text()
+    text = Path(f"examples/{name}.toml").read_text()
     text = "\n".join(line.split(", smoothing_velocity")[0] + ', law = "exact"}' if line.startswith("friction =")
                      else line for line in text.splitlines())
-    path = tmp_path / "four_bar_exact.toml"
+    path = tmp_path / f"{name}_exact.toml"
     path.write_text(text)
     model_file = kronlag.load_model(path, apply_drives=False)
     model = numeric_model(model_file)
-    q0, qd0 = initial_state(model_file, model)
-    with pytest.warns(kronlag.RedundantConstraintsWarning):  # the linkage stopping in all its pins
+    return (model, *initial_state(model_file, model))
+
+
+def _one_event_per_joint_and_instant(events: list[StictionEvent]) -> None:
+    keys = [(event.t, event.joint) for event in events]
+    assert len(keys) == len(set(keys)), keys
+
+
+def test_four_bar_with_exact_friction_in_every_pin_rubs_against_every_rate(tmp_path):
+    """The four-bar of examples/four_bar_friction.toml with the exact law in its four pins: the pins'
+    relative rotations reverse while the linkage moves (kinematic dead points: 'reverse' events, not
+    stops) and the whole linkage reverses at once (all four pins stop at t = 0.9149: one pin holds the group,
+    the others locked to it, no redundant holds; its holding torque far beyond the group's capacity), one
+    event per pin and instant; each joint's friction opposes its
+    rate at every output (friction power <= 0) and the energy lost is the friction work (to 1e-8 J: the
+    power's jumps at the events are integrated from each segment's side)."""
+    model, q0, qd0 = _exact_example("four_bar_friction", tmp_path)
+    with warnings.catch_warnings():  # the linkage stopping in all its pins: one holds, the others are locked
+        warnings.simplefilter("error", kronlag.RedundantConstraintsWarning)
         trajectory = kronlag.simulate(model, (0, 2.0), q0, qd0, rtol=1e-10, atol=1e-12)
     assert trajectory.success, trajectory.message
     kinds = {event.kind for event in _stiction_events(trajectory)}
     assert "reverse" in kinds
+    _one_event_per_joint_and_instant(_stiction_events(trajectory))
     columns = trajectory.columns()
     assert np.max(columns["friction_power"]) <= 1e-9
     lost = trajectory.total_energy[0] - trajectory.total_energy
@@ -284,3 +299,127 @@ def test_an_impact_that_turns_a_sliding_joint_reverses_its_friction():
     taken = sum(0.5 * inertia * (event.speed_before ** 2 - event.speed_after ** 2) for event in impacts)
     lost = trajectory.total_energy[0] - trajectory.total_energy[-1]
     np.testing.assert_allclose(lost, -trajectory.friction_work[-1] + taken, rtol=0, atol=1e-7)
+
+
+# -- a locked pair: two pins geared together -----------------------------------------------------------
+
+BAR_MASS, BAR_LENGTH, WHEEL_MASS, WHEEL_DISTANCE = 1.0, 1.0, 10.0, 2.0
+BAR_PIN, WHEEL_PIN, MU_S, MU_K = 0.01, 0.05, 0.5, 0.4
+
+
+def _geared_bar(angle: float):
+    """A bar (mass 1, length 1) on a pin at one end at the origin, geared to a balanced wheel (mass 10) on a pin
+    at its centre ``(2, 0)`` by ``th_wheel = -th_bar`` (a constraint on the angles: pure torques, no load on
+    the pins); both pins with the exact law (mu_s 0.5, mu_k 0.4; radii 0.01 and 0.05).  Held at ``angle``
+    above the horizontal and released at rest: ``(model, trajectory or the error)``."""
+    m1, m2, L, g = sp.symbols("m1 m2 L g")
+    system = mechanism([free_body("bar", mass=m1, inertia=m1 * L ** 2 / 12),
+                        free_body("wheel", mass=m2, inertia=m2 / 8)], parameters=[m1, m2, L, g], gravity=(0, -g))
+    friction = dict(static=MU_S, kinetic=MU_K, law="exact")
+    system.add_joint("revolute", "ground", "bar", at_b=(-L / 2, 0), name="bar pin",
+                     friction=kronlag.Friction(radius=BAR_PIN, **friction))
+    system.add_joint("revolute", "ground", "wheel", at_a=(WHEEL_DISTANCE, 0), name="wheel pin",
+                     friction=kronlag.Friction(radius=WHEEL_PIN, **friction))
+    bar_angle, wheel_angle = system.coordinates[2], system.coordinates[5]
+    system.add_constraint(wheel_angle + bar_angle, name="gear")
+    model = kronlag.derive(system).numeric({"m1": BAR_MASS, "m2": WHEEL_MASS, "L": BAR_LENGTH, "g": G})
+    names = model.coordinate_names
+    q, qd = model.assemble([BAR_LENGTH / 2 * np.cos(angle), BAR_LENGTH / 2 * np.sin(angle), angle,
+                            WHEEL_DISTANCE, 0, -angle], fixed={names[2]: angle})
+    return model, q, qd
+
+
+def _geared_thresholds() -> tuple[float, float]:
+    """At rest the pins carry the weights (N = m g each: the gear's multiplier is a pair of torques) and the
+    bar needs the holding torque tau = m1 g L/2 cos(angle) about its pin; the wheel pin's rate is minus the
+    bar pin's, so its friction counts one for one.  The group holds iff tau <= r1 mu_s m1 g + r2 mu_s m2 g;
+    the wheel pin alone holds it iff tau <= r2 mu_s m2 g.  Returned: the two torques."""
+    alone = WHEEL_PIN * MU_S * WHEEL_MASS * G
+    return alone, alone + BAR_PIN * MU_S * BAR_MASS * G
+
+
+def _torque(angle: float) -> float:
+    return BAR_MASS * G * BAR_LENGTH / 2 * np.cos(angle)
+
+
+def test_a_locked_pair_held_by_one_pin_sticks_with_that_pin_holding_it():
+    """tau just below the wheel pin's own capacity (the bar pin's own is 20 times too small): the geared pair
+    sticks at the start and stays; the wheel pin holds tau (its friction column), the bar pin, locked to it,
+    carries nothing, and no event is spurious (one 'stick' per pin at t0)."""
+    alone, _ = _geared_thresholds()
+    angle = np.arccos(0.98 * alone / (BAR_MASS * G * BAR_LENGTH / 2))
+    model, q, qd = _geared_bar(angle)
+    trajectory = kronlag.simulate(model, (0, 1.0), q, qd, rtol=1e-10, atol=1e-12)
+    assert trajectory.success, trajectory.message
+    events = _stiction_events(trajectory)
+    assert sorted((event.joint, event.kind, event.t) for event in events) == [
+        ("bar pin", "stick", 0.0), ("wheel pin", "stick", 0.0)]
+    np.testing.assert_allclose(trajectory.q - q, 0.0, atol=1e-12)
+    columns = trajectory.columns()
+    np.testing.assert_allclose(np.abs(columns["wheel pin.friction"]), _torque(angle), rtol=1e-9)
+    np.testing.assert_allclose(columns["wheel pin.normal_load"], WHEEL_MASS * G, rtol=1e-9)
+    np.testing.assert_allclose(columns["bar pin.friction"], 0.0, atol=1e-12)
+
+
+def test_a_locked_pair_beyond_the_combined_capacity_slips_as_a_whole():
+    """tau 2 % above the combined capacity: both pins slip at t0 together (directions from the motion: the
+    bar falls, th_bar decreasing, the wheel turning the other way) and the energy lost is the friction work."""
+    _, combined = _geared_thresholds()
+    angle = np.arccos(1.02 * combined / (BAR_MASS * G * BAR_LENGTH / 2))
+    model, q, qd = _geared_bar(angle)
+    trajectory = kronlag.simulate(model, (0, 0.3), q, qd, rtol=1e-10, atol=1e-12)
+    assert trajectory.success, trajectory.message
+    events = _stiction_events(trajectory)
+    assert sorted((event.joint, event.kind, event.t) for event in events) == [
+        ("bar pin", "slip", 0.0), ("wheel pin", "slip", 0.0)]
+    assert trajectory.q[-1, 2] < angle - 1e-3 and trajectory.q[-1, 5] > -angle + 1e-3
+    columns = trajectory.columns()
+    assert np.all(columns["bar pin.rate"][1:] < 0) and np.all(columns["wheel pin.rate"][1:] > 0)
+    lost = trajectory.total_energy[0] - trajectory.total_energy
+    assert lost[-1] > 1e-3
+    np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)
+
+
+def test_a_locked_pair_between_one_pins_capacity_and_the_groups_is_refused():
+    """tau between the wheel pin's own capacity and the combined one: it sticks only if the holding torque is
+    divided between the pins, which the segments cannot watch: the run stops naming the pins, t, q and the
+    smooth law (before, it held both pins redundantly with a minimum-norm division)."""
+    alone, combined = _geared_thresholds()
+    angle = np.arccos((alone + combined) / 2 / (BAR_MASS * G * BAR_LENGTH / 2))
+    model, q, qd = _geared_bar(angle)
+    with pytest.raises(kronlag.NumericalError, match=r"exact stiction at t = 0, q = .*'bar pin', 'wheel pin' "
+                                                      r"are locked together.*law='smooth'"):
+        kronlag.simulate(model, (0, 0.3), q, qd, rtol=1e-10, atol=1e-12)
+
+
+def test_slider_crank_stopped_by_its_guide_holds_by_the_guide_alone_without_spurious_events(tmp_path):
+    """examples/slider_crank_friction.toml with the exact law everywhere: the spinning crank is brought to
+    rest and the guide sticks (t = 0.2815); the three pins are then locked to it (their rates zero for every
+    motion the held guide allows): no friction of their own, one 'stick' each, and no event after.  The
+    guide's holding force is the closed form of virtual work on the stopped linkage (pivot at the origin,
+    guide on y = 0): f = g (m1 + m2) l1/2 cos(th) / |dx3/dth|, dx3/dth = -l1 sin(th) (1 + l1 cos(th) /
+    sqrt(l2^2 - l1^2 sin^2(th))).  (Before, the pins 'slid' with r mu_k N in fixed directions while at rest,
+    flipping with 6 'reverse' events at one instant, and the guide held 0.0125 N instead of 4.34 N.)"""
+    model, q0, qd0 = _exact_example("slider_crank_friction", tmp_path)
+    trajectory = kronlag.simulate(model, (0, 1.5), q0, qd0, rtol=1e-10, atol=1e-12)
+    assert trajectory.success, trajectory.message
+    events = _stiction_events(trajectory)
+    _one_event_per_joint_and_instant(events)
+    stop = events[-1].t
+    assert 0.28 < stop < 0.29
+    assert sorted((event.joint, event.kind) for event in events if event.t == stop) == [
+        ("crank pin", "stick"), ("guide", "stick"), ("main bearing", "stick"), ("wrist pin", "stick")]
+    l1, l2, m1, m2 = 0.1, 0.3, 1.0, 2.0
+    angle = events[-1].q[2]
+    slope = l1 * np.sin(angle) * (1 + l1 * np.cos(angle) / np.sqrt(l2 ** 2 - (l1 * np.sin(angle)) ** 2))
+    holding = G * (m1 + m2) * l1 / 2 * np.cos(angle) / slope
+    columns = trajectory.columns()
+    after = trajectory.t > stop
+    np.testing.assert_allclose(np.abs(columns["guide.friction"][after]), holding, rtol=1e-8)
+    assert np.all(np.abs(columns["guide.friction"][after]) <= 0.15 * columns["guide.normal_load"][after])
+    for pin in ("main bearing", "crank pin", "wrist pin"):
+        np.testing.assert_allclose(columns[f"{pin}.friction"][after], 0.0, atol=1e-12)
+    np.testing.assert_allclose(trajectory.q[after] - events[-1].q, 0.0, atol=1e-10)
+    assert np.max(columns["friction_power"]) <= 1e-9
+    lost = trajectory.total_energy[0] - trajectory.total_energy
+    np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)

@@ -54,6 +54,7 @@ __all__ = [
     "FRICTION_KINDS",
     "FRICTION_LAWS",
     "MODE_HELD",
+    "MODE_LOCKED",
     "MODE_SIGN",
     "MODE_SMOOTH",
     "RECORD_FIELDS",
@@ -84,6 +85,10 @@ MODE_SMOOTH = 0
 MODE_SIGN = 2
 #: Stuck: held by a constraint ``v = 0``.
 MODE_HELD = 3
+#: Stuck with another: a joint whose rate is zero for every motion the held joints' rows and the constraints
+#: allow (locked to a held joint); no row of its own and no force in the equations (its static friction
+#: counts in the held group's capacity, :mod:`kronlag.simulation.stiction`).
+MODE_LOCKED = 4
 
 
 @dataclass(frozen=True, kw_only=True)

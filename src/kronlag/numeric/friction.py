@@ -25,6 +25,7 @@ import numpy as np
 from ..core.errors import NumericalError
 from ..model.friction import (
     MODE_HELD,
+    MODE_LOCKED,
     MODE_SIGN,
     MODE_SMOOTH,
     RECORD_FIELDS,
@@ -94,7 +95,7 @@ def _direction(record: dict, rate: float) -> float:
         return math.tanh(rate / record["smoothing_velocity"])
     if mode == MODE_SIGN:
         return float(np.sign(rate))
-    return 0.0 if mode == MODE_HELD else mode
+    return mode if mode in (1.0, -1.0) else 0.0  # held or locked: no force of the law
 
 
 def _factor(record: dict, rate: float) -> float:
@@ -106,8 +107,8 @@ def _factor(record: dict, rate: float) -> float:
 
 
 def _viscous(record: dict, rate: float) -> float:
-    """``c v``, none while held (the holding row gives the whole force)."""
-    return 0.0 if record["mode"] == MODE_HELD else record["viscous"] * rate
+    """``c v``, none while held or locked (the holding row gives the whole force)."""
+    return 0.0 if record["mode"] in (MODE_HELD, MODE_LOCKED) else record["viscous"] * rate
 
 
 def friction_force(record: dict, lam: np.ndarray, rate: float) -> tuple[float, float]:

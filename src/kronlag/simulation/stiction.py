@@ -22,7 +22,9 @@ The rule at the start: a joint whose rate is within :data:`~kronlag.numeric.tole
 ``atol`` of zero is at rest and decided as a joint that has just stopped (all such joints held
 together: each sticks if its holding force is within ``r mu_s N``, else slides in that force's
 direction); any other slides in the direction of its rate.  Joints that stop at one instant are
-decided together in the same way.  Each transition is a :class:`~.trajectory.StictionEvent` in
+decided together in the same way.  A joint whose rate the holds make zero for every allowed motion is
+*locked* to them (:data:`MODE_LOCKED`, no force of its own, no events) and its group is decided as a
+whole (:func:`_decide`); where that takes dividing the holding force among the group, a run refuses.  Each transition is a :class:`~.trajectory.StictionEvent` in
 ``trajectory.events``.
 """
 
@@ -36,6 +38,7 @@ import numpy as np
 
 from ..model.friction import (
     MODE_HELD,
+    MODE_LOCKED,
     MODE_SMOOTH,
     friction_record,
     stick_constraint_name,
@@ -85,8 +88,11 @@ def stiction_model(model: NumericModel, modes: tuple[int, ...]) -> NumericModel:
 
 def held_forces(model: NumericModel, base_s: int, modes: tuple[int, ...], mu: np.ndarray) -> np.ndarray:
     """The friction force of each joint with friction held in ``modes`` (NaN for the others) from the
-    multipliers ``mu`` (N, s) of the segment's model, whose rows past ``base_s`` hold the joints."""
+    multipliers ``mu`` (N, s) of the segment's model, whose rows past ``base_s`` hold the joints; 0 for a
+    joint locked to a held one (its static friction is not needed: the held joint holds the group within its
+    own ``r mu_s N``, the rule of :func:`transition`)."""
     forces = np.full((len(mu), len(modes)), np.nan)
+    forces[:, [j for j, mode in enumerate(modes) if mode == MODE_LOCKED]] = 0.0
     held = [j for j, mode in enumerate(modes) if mode == MODE_HELD]
     for k, j in enumerate(held):
         forces[:, j] = mu[:, base_s + k]
@@ -102,19 +108,6 @@ def _holding(variant: NumericModel, t: float, y: np.ndarray) -> list[tuple[float
     records = friction_records(variant, t, y[:m], y[m:])
     return [(float(nu[int(record["hold_row"])]) if record["mode"] == MODE_HELD else 0.0, sticking_limit(record, nu))
             for record in records]
-
-
-def _passing(model: NumericModel, stopped: list[int], t: float, y: np.ndarray) -> list[int]:
-    """The joints of ``stopped`` whose rate vanishes at ``q`` for every motion the constraints allow (its
-    row ``J_rate`` is a combination of ``[Phi_q; A]``: a kinematic dead point of that joint, e.g. a pin of
-    a four-bar whose relative rotation reverses while the linkage moves): they cannot be held (the row
-    ``v = 0`` would also have to hold just after) and their rate passes through zero."""
-    m = model.m
-    q = y[:m]
-    rows = np.vstack([model.Phi_q(q, t).reshape(-1, m), model.A(q, t).reshape(-1, m)])
-    rank = matrix_rank(rows, model.rank_rtol) if len(rows) else 0
-    records = friction_records(model, t, q, y[m:])
-    return [j for j in stopped if matrix_rank(np.vstack([rows, records[j]["J"][None, :]]), model.rank_rtol) == rank]
 
 
 def _dependent(rows: np.ndarray, row: np.ndarray, rank_rtol: float) -> bool:
@@ -162,18 +155,57 @@ def _rate_changes(model: NumericModel, t: float, y: np.ndarray) -> np.ndarray:
     return np.array([(float(a["J"] @ (qd + step * qdd)) - float(b["J"] @ qd)) / step for a, b in zip(ahead, now)])
 
 
-def transition(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[int, ...], triggered: list[int],
-               t: float, y: np.ndarray, names: list[str], rest: float) -> tuple[tuple[int, ...], list[StictionEvent]]:
-    """The modes after the joints ``triggered`` (indices) had their watched functions fall through zero at
-    ``(t, y)`` (the module docstring), and the events; ``variant_of(modes)`` is a segment's model in
-    ``modes``, ``rest`` the rate below which a joint is at rest."""
+def _base_rows(model: NumericModel, modes: tuple[int, ...], t: float, q: np.ndarray) -> np.ndarray:
+    """``[Phi_q; A]`` of the segment's model ``model`` in ``modes`` without its holding rows (the last rows of
+    ``A``, one per held joint)."""
+    m = len(q)
+    held = sum(mode == MODE_HELD for mode in modes)
+    A = model.A(q, t).reshape(-1, m)
+    return np.vstack([model.Phi_q(q, t).reshape(-1, m), A[:len(A) - held]])
+
+
+def _ratios(base: np.ndarray, holds: list[np.ndarray], row: np.ndarray) -> np.ndarray:
+    """The coefficients ``c`` with ``row = sum_h c_h holds[h] + (a combination of base)``: a locked joint's
+    rate is ``sum_h c_h v_h`` for every motion the constraints allow (``row`` is such a combination)."""
+    columns = np.vstack([base, *[hold[None, :] for hold in holds]]).T
+    solution = np.linalg.lstsq(columns, row, rcond=None)[0]
+    return solution[len(base):]
+
+
+def _refuse(names: list[str], joints: list[int], t: float, y: np.ndarray, why: str) -> NumericalError:
     m = len(y) // 2
-    old = modes
+    return NumericalError(
+        f"exact stiction at t = {t:.9g}, q = {np.array2string(y[:m], precision=6)}: joints "
+        f"{', '.join(repr(names[j]) for j in joints)} are locked together (the rate of one is zero for every "
+        f"motion that holding the other allows), {why}; kronlag does not divide the holding force among "
+        "them: give these joints Friction(law='smooth')")
+
+
+def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[int, ...], triggered: list[int],
+            t: float, y: np.ndarray, names: list[str], rest: float) -> tuple[tuple[int, ...], dict]:
+    """The modes after the joints ``triggered`` had their watched functions fall through zero at ``(t, y)``
+    (:func:`transition`), and ``(holding force, r mu_s N)`` of the joints decided.
+
+    Locked groups: a joint whose row ``J_rate`` is a combination of the constraints' rows and a held
+    joint's row ``J_h`` (``v = c v_h`` for every allowed motion) does not slide while ``h`` is held: it is
+    *locked* (:data:`MODE_LOCKED`: no force, no row, not watched).  A group ``h`` + its locked joints sticks
+    when ``|f_h| <= r mu_s N`` of ``h`` alone (a division of the hold with zero in the locked joints is
+    admissible, so exact), and slides as a whole (each locked joint in the direction ``sign(c) sign(f_h)``)
+    when ``|f_h|`` exceeds the group's capacity ``r_h mu_s N_h + sum |c| r mu_s N`` (loads from the
+    reactions with ``h`` holding the group).  Between the two, and for a joint locked to several held ones,
+    the division of the holding force decides and a run refuses (:class:`NumericalError`)."""
+    m = len(y) // 2
     current = variant_of(modes)
     records = friction_records(current, t, y[:m], y[m:])
-    rates = [float(record["J"] @ y[m:]) for record in records]
+    rows = [np.asarray(record["J"], dtype=float) for record in records]
+    rates = [float(row @ y[m:]) for row in rows]
+    base = _base_rows(current, modes, t, y[:m])
+    rank_rtol = current.rank_rtol
     new = list(modes)
     found: dict[int, tuple[float, float]] = {}  # (holding force, r mu_s N) by joint, for the events
+    # locked to the old holds: with each hold, the rate ratios of the joints locked to it
+    old_holds = [j for j, mode in enumerate(modes) if mode == MODE_HELD]
+    old_locked = [j for j, mode in enumerate(modes) if mode == MODE_LOCKED]
     slipping = [j for j in triggered if modes[j] == MODE_HELD]  # holding force reached r mu_s N: slide along it
     if slipping:  # (the multipliers cost a forward dynamics: only where a hold is read)
         nu = _multipliers(current, t, y)
@@ -181,23 +213,124 @@ def transition(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tup
             force = float(nu[int(records[j]["hold_row"])])
             new[j] = 1 if force > 0 else -1
             found[j] = (force, sticking_limit(records[j], nu))
+            members = []
+            for i in old_locked:
+                ratios = _ratios(base, [rows[h] for h in old_holds], rows[i])
+                ratio = ratios[old_holds.index(j)]
+                if abs(ratio) > 1e-9 * np.max(np.abs(ratios)):
+                    members.append((i, ratio))
+            if members:  # the hold reached its own capacity; the locked joints' capacity would hold on
+                limits = _holding(current, t, y)
+                capacity = found[j][1] + sum(abs(ratio) * limits[i][1] for i, ratio in members)
+                if abs(force) <= capacity:
+                    raise _refuse(names, [j] + [i for i, _ in members], t, y,
+                                  f"the holding force {force:.6g} of {names[j]!r} reached its own r mu_s N "
+                                  f"{found[j][1]:.6g} but not the group's {capacity:.6g}")
+                for i, ratio in members:
+                    new[i] = int(np.sign(ratio)) * new[j]
     stopped = [j for j, mode in enumerate(modes) if mode in (1, -1) and (j in triggered or abs(rates[j]) <= rest)]
-    passing = _passing(current, stopped, t, y)
-    for j in passing:
-        new[j] = -modes[j]
-    stopped = [j for j in stopped if j not in passing]
-    if stopped:  # held together: each sticks if its holding force is within r mu_s N
-        trial = tuple(MODE_HELD if j in stopped else mode for j, mode in enumerate(new))
-        holding = _holding(variant_of(trial), t, y)
+    for j in stopped:  # kinematic dead points (the constraints alone zero the rate here): the rate passes zero
+        if _dependent(base, rows[j], rank_rtol):
+            new[j] = -modes[j]
+    stopped = [j for j in stopped if not _dependent(base, rows[j], rank_rtol)]
+    if stopped:  # held together, each group by its own hold (module docstring, and above)
+        holds = [j for j, mode in enumerate(new) if mode == MODE_HELD]
+        locked = [j for j, mode in enumerate(new) if mode == MODE_LOCKED]
+        new_holds = []
         for j in stopped:
-            force, threshold = found[j] = holding[j]
-            new[j] = MODE_HELD if abs(force) <= threshold else (1 if force > 0 else -1)
-    new = _consistent(variant_of, new, t, y, rest)
+            held_rows = np.vstack([base, *[rows[h][None, :] for h in holds]])
+            if _dependent(held_rows, rows[j], rank_rtol):
+                locked.append(j)
+            else:
+                holds.append(j)
+                new_holds.append(j)
+        trial = tuple(MODE_HELD if j in holds else MODE_LOCKED if j in locked else mode for j, mode in enumerate(new))
+        holding = _holding(variant_of(trial), t, y)
+        groups: dict[int, list[tuple[int, float]]] = {h: [] for h in new_holds}
+        for i in locked:
+            if i not in stopped:
+                continue
+            ratios = _ratios(base, [rows[h] for h in holds], rows[i])
+            tied = [holds[k] for k, ratio in enumerate(ratios) if abs(ratio) > 1e-9 * np.max(np.abs(ratios))]
+            if len(tied) != 1 or tied[0] not in groups:  # several holds, or one decided before it stopped
+                raise _refuse(names, [i] + tied, t, y, f"the rate of {names[i]!r} is tied to held joints "
+                              "that do not stop with it alone")
+            groups[tied[0]].append((i, float(ratios[holds.index(tied[0])])))
+        for h, members in groups.items():
+            force, threshold = found[h] = holding[h]
+            capacity = threshold + sum(abs(ratio) * holding[i][1] for i, ratio in members)
+            holder = _holder(variant_of, trial, h, [i for i, _ in members], holding, t, y)
+            if holder is not None:
+                for i in [h] + [i for i, _ in members]:
+                    new[i], found[i] = (MODE_HELD, holder[1]) if i == holder[0] else (MODE_LOCKED, (0.0, holder[2][i][1]))
+            elif abs(force) > capacity and _slides_as_whole(variant_of, trial, h, members, force, t, y):
+                new[h] = 1 if force > 0 else -1
+                for i, ratio in members:
+                    new[i], found[i] = int(np.sign(ratio)) * new[h], holding[i]
+            else:
+                raise _refuse(names, [h] + [i for i, _ in members], t, y,
+                              f"the holding force {force:.6g} of {names[h]!r} exceeds its own r mu_s N "
+                              f"{threshold:.6g} but not surely the group's ({capacity:.6g} with the loads "
+                              "without the others' friction)")
+    return tuple(_consistent(variant_of, new, t, y, rest)), found
+
+
+def _slides_as_whole(variant_of: Callable[[tuple[int, ...]], NumericModel], trial: tuple[int, ...], hold: int,
+                     members: list[tuple[int, float]], force: float, t: float, y: np.ndarray) -> bool:
+    """Whether the group ``hold`` + ``members`` (joint, rate ratio) cannot stick even with every locked joint
+    at its full static friction against the motion that would start: ``hold`` held in a model where the
+    members slide that way (their ``r mu_k N`` and the loads it causes solved together, the friction
+    fixed point) still needs more than its own ``r mu_s N`` plus the members' spare ``r (mu_s - mu_k) N``.
+    (The group's capacity from the loads without the members' friction is the first estimate; this one
+    counts how their friction changes the loads, so both must agree for a slip.)"""
+    m = len(y) // 2
+    sign = 1 if force > 0 else -1
+    modes = list(trial)
+    for i, ratio in members:
+        modes[i] = int(np.sign(ratio)) * sign
+    variant = variant_of(tuple(modes))
+    try:
+        nu = _multipliers(variant, t, y)
+    except NumericalError:
+        return False  # no fixed point: not a slip it can vouch for (the caller refuses)
+    records = friction_records(variant, t, y[:m], y[m:])
+    spare = sum(abs(ratio) * sticking_limit(records[i], nu) * (1 - records[i]["kinetic"] / records[i]["static"])
+                for i, ratio in members  # (with a Stribeck term the law already gives mu_s at rest)
+                if records[i]["static"] > 0 and records[i]["stribeck_velocity"] <= 0)
+    return sign * float(nu[int(records[hold]["hold_row"])]) > sticking_limit(records[hold], nu) + spare
+
+
+def _holder(variant_of: Callable[[tuple[int, ...]], NumericModel], trial: tuple[int, ...], hold: int,
+            members: list[int], holding: list[tuple[float, float]], t: float,
+            y: np.ndarray) -> tuple[int, tuple[float, float], list[tuple[float, float]]] | None:
+    """A joint of the locked group ``hold`` + ``members`` (``hold`` held in ``trial``, whose ``_holding`` is
+    ``holding``) that holds the whole group within its own ``r mu_s N`` with the others free of friction:
+    ``(joint, (f, r mu_s N), holding of that trial)``, or None.  (Which joint holds changes the reactions, so
+    each is tried in its own segment model.)"""
+    for joint in [hold, *members]:
+        if joint != hold:
+            modes = list(trial)
+            modes[hold], modes[joint] = MODE_LOCKED, MODE_HELD
+            holding = _holding(variant_of(tuple(modes)), t, y)
+        force, threshold = holding[joint]
+        if abs(force) <= threshold:
+            return joint, (force, threshold), holding
+    return None
+
+
+def transition(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[int, ...], triggered: list[int],
+               t: float, y: np.ndarray, names: list[str], rest: float) -> tuple[tuple[int, ...], list[StictionEvent]]:
+    """The modes after the joints ``triggered`` (indices) had their watched functions fall through zero at
+    ``(t, y)`` (the module docstring, :func:`_decide`), and the events; ``variant_of(modes)`` is a segment's
+    model in ``modes``, ``rest`` the rate below which a joint is at rest."""
+    m = len(y) // 2
+    new, found = _decide(variant_of, modes, triggered, t, y, names, rest)
     events = []
-    for j, (before, after) in enumerate(zip(old, new)):
-        if before == after:
+    for j, (before, after) in enumerate(zip(modes, new)):
+        if before == after or {before, after} == {MODE_HELD, MODE_LOCKED}:
             continue
-        kind = "stick" if after == MODE_HELD else "slip" if before == MODE_HELD else "reverse"
+        stuck = (MODE_HELD, MODE_LOCKED)
+        kind = "stick" if after in stuck else "slip" if before in stuck else "reverse"
         force, threshold = found.get(j, (0.0, 0.0))
         events.append(StictionEvent(t=t, joint=names[j], kind=kind, q=y[:m].copy(), force=force,
                                     threshold=threshold))
@@ -272,12 +405,11 @@ def start_modes(model: NumericModel, variant_of: Callable[[tuple[int, ...]], Num
     resting = [j for j, record in enumerate(records) if modes[j] != MODE_SMOOTH and abs(float(record["J"] @ y[m:])) <= rest]
     if not resting:
         return tuple(modes), []
-    new, _ = transition(variant_of, tuple(modes), resting, t, y, names, rest)
+    new, found = _decide(variant_of, tuple(modes), resting, t, y, names, rest)
     # at rest at the start: a joint that slides slips, one that is held sticks (whatever direction it was given)
-    holding = _holding(variant_of(tuple(MODE_HELD if j in resting else mode for j, mode in enumerate(modes))), t, y)
     events = []
     for j in resting:
-        force, threshold = holding[j]
-        events.append(StictionEvent(t=t, joint=names[j], kind="stick" if new[j] == MODE_HELD else "slip",
+        force, threshold = found.get(j, (0.0, 0.0))
+        events.append(StictionEvent(t=t, joint=names[j], kind="stick" if new[j] in (MODE_HELD, MODE_LOCKED) else "slip",
                                     q=y[:m].copy(), force=force, threshold=threshold))
     return new, events

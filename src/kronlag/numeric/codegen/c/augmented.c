@@ -120,9 +120,10 @@ static void kronlag_friction_wrench(const double *record, const double *lam, dou
 
 /* The fields after J_rate (m), W (36) and the rows (6): u_force (3), u_couple (3), then RECORD_FIELDS:
  * static, kinetic, viscous, stribeck_velocity, radius, 1/arm, preload, smoothing_velocity, mode,
- * hold_row (the modes of kronlag.model.friction: 0 smooth, +-1 sliding that way, 2 sign(v), 3 held). */
+ * hold_row (the modes of kronlag.model.friction: 0 smooth, +-1 sliding that way, 2 sign(v), 3 held,
+ * 4 locked to a held joint). */
 #define KRONLAG_FRICTION_FIELDS(record) ((record) + KRONLAG_M + 48)
-enum { KRONLAG_MODE_SMOOTH = 0, KRONLAG_MODE_SIGN = 2, KRONLAG_MODE_HELD = 3 };
+enum { KRONLAG_MODE_SMOOTH = 0, KRONLAG_MODE_SIGN = 2, KRONLAG_MODE_HELD = 3, KRONLAG_MODE_LOCKED = 4 };
 
 /* The law's sign(v) by the record's mode. */
 static double kronlag_friction_direction(const double *c, double rate)
@@ -130,7 +131,7 @@ static double kronlag_friction_direction(const double *c, double rate)
     int mode = (int)c[8];
     if (mode == KRONLAG_MODE_SMOOTH) return tanh(rate / c[7]);
     if (mode == KRONLAG_MODE_SIGN) return (rate > 0.0) - (rate < 0.0);
-    return mode == KRONLAG_MODE_HELD ? 0.0 : (double)mode;
+    return mode == 1 || mode == -1 ? (double)mode : 0.0; /* held or locked: no force of the law */
 }
 
 /* r mu(v): the factor of the normal load in one joint's friction force at the rate v. */
@@ -199,7 +200,8 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
         rates[j] = 0.0;
         for (int i = 0; i < m; ++i) rates[j] += record[i] * qd[i];
         factor[j] = kronlag_friction_coefficient(record, rates[j]);
-        viscous[j] = (int)KRONLAG_FRICTION_FIELDS(record)[8] == KRONLAG_MODE_HELD ? 0.0
+        int mode = (int)KRONLAG_FRICTION_FIELDS(record)[8];
+        viscous[j] = mode == KRONLAG_MODE_HELD || mode == KRONLAG_MODE_LOCKED ? 0.0
                      : KRONLAG_FRICTION_FIELDS(record)[2] * rates[j];
         if (factor[j] == 0.0 && viscous[j] == 0.0) continue;
         for (int i = 0; i < m; ++i) forcing[na * m + i] = -record[i];
