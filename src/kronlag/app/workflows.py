@@ -85,7 +85,8 @@ class ModelCheck:
         Why the initial state cannot be assembled (the unsatisfied constraint rows); empty if it can.
     constraint_groups : tuple of ConstraintGroup
         The holonomic rows by joint or loop and their ranks at the assembled state (with
-        :attr:`dependent_rows`; empty when it was not assembled).
+        :attr:`dependent_rows`; empty when it was not assembled); reported when some group has
+        several rows.
     dependent_rows : tuple of str
         The rows the rank policy counts dependent on the others there (as many as the solver drops,
         :func:`~kronlag.numeric.tolerances.rank_magnitudes`): those nearest to the span of the rows
@@ -127,9 +128,13 @@ class ModelCheck:
         elif self.assembly_correction is not None:
             lines.append("initial state assembled: max |q0 - guess| = {:.3g}, max |qd0 - guess| = {:.3g}"
                          .format(*self.assembly_correction))
-        if len(self.constraint_groups) > 1:
+        if len(self.constraint_groups) > 1 and any(len(group.rows) > 1 for group in self.constraint_groups):
+            shown = [group for group in self.constraint_groups
+                     if len(self.constraint_groups) <= _LISTED_GROUPS or group.rank < len(group.rows)]
+            unlisted = len(self.constraint_groups) - len(shown)
             lines.append("rank of each joint's or loop's rows at the assembled state: " + "; ".join(
-                f"{group.name} {group.rank} of {len(group.rows)}" for group in self.constraint_groups))
+                f"{group.name} {group.rank} of {len(group.rows)}" for group in shown)
+                + (f"{'; ' if shown else ''}{unlisted} more of full rank" if unlisted else ""))
         if self.dependent_rows:
             lines.append("rows dependent on the others at the assembled state (redundant): "
                          + ", ".join(self.dependent_rows))
@@ -145,6 +150,10 @@ class ModelCheck:
 
 #: :attr:`ModelCheck.mobility_at` when the mobility could not be counted at an assembled state.
 _NAIVE = "m - r - s"
+
+
+#: :meth:`ModelCheck.report` lists every group's rank up to this many groups, beyond it the deficient ones.
+_LISTED_GROUPS = 20
 
 
 @dataclass(frozen=True)
