@@ -109,3 +109,58 @@ def test_check_reports_each_loop_and_its_rank(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "rank of each joint's or loop's rows at the assembled state: loop 2 of 2; again 2 of 2" in out
     assert "rows dependent on the others at the assembled state (redundant): again.x, again.z" in out
+
+
+NONPHYSICAL = """<?xml version="1.0"?>
+<robot name="rod">
+  <link name="base"/>
+  <link name="rod"><inertial><mass value="1.0"/>
+    <inertia ixx="1e-6" ixy="1e-6" ixz="1e-6" iyy="1e-6" iyz="1e-6" izz="1e-6"/></inertial></link>
+  <joint name="hinge" type="revolute"><parent link="base"/><child link="rod"/><axis xyz="0 1 0"/></joint>
+</robot>
+"""
+
+
+def test_nonphysical_inertia_is_refused_unless_allowed(tmp_path):
+    """A tensor whose principal moments violate the triangle inequality (example-robot-data's Go1
+    placeholder, all six entries 1e-6): refused in one located line; ``allow_nonphysical_inertia=True``
+    keeps it with a warning naming the link, and the numeric model, which checks the bodies again,
+    refuses the body that is still not physical."""
+    from kronlag.core.errors import ModelError, ModelFileError
+
+    path = tmp_path / "rod.urdf"
+    path.write_text(NONPHYSICAL)
+    with pytest.raises(ModelFileError, match=r"rod\.urdf:4: <link name='rod'>: <inertial>: .*triangle inequality"):
+        kronlag.load_urdf(path)
+    with pytest.warns(RobotFileWarning, match=r"rod\.urdf:4: <link name='rod'>: .*triangle inequality.*\(kept: "
+                                              r"allow_nonphysical_inertia=True\)"):
+        system = kronlag.load_urdf(path, allow_nonphysical_inertia=True)
+    with pytest.raises(ModelError, match=r"body 'rod': the principal moments .* triangle inequality"):
+        kronlag.derive(system).numeric(system.robot.values, backend="python")
+
+
+@pytest.mark.slow
+def test_go1_with_its_placeholder_inertial_agrees_with_pinocchio(monkeypatch):
+    """Go1 as shipped: its massless 'base' link's placeholder tensor is kept (a warning), merged by the
+    fixed joint into the trunk, whose body is physical; M, g, C qd and the accelerations agree with
+    Pinocchio's free flyer to <= 1e-9 (bench_robots.compare_floating)."""
+    import numpy as np
+
+    pytest.importorskip("pinocchio")
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "bench"))
+    import bench_robots
+
+    folder = bench_robots.robots_folder()
+    if folder is None:
+        pytest.skip("example-robot-data is not installed")
+    path = folder / "go1_description/urdf/go1.urdf"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        system = kronlag.load_urdf(path, floating_base=True, allow_nonphysical_inertia=True)
+    assert [str(w.message).split(": ")[1] for w in caught if "triangle" in str(w.message)] == ["<link name='base'>"]
+    rng = np.random.default_rng(5)
+    values = {**system.robot.values, **{joint.torque: rng.uniform(-1, 1) for joint in system.robot.joints
+                                        if joint.torque}}
+    model = kronlag.derive(system).numeric(values, backend="python")
+    worst = bench_robots.compare_floating(path, system, model, values, states=3)
+    assert max(worst.values()) <= 1e-9, worst

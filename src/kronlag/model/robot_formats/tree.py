@@ -273,16 +273,22 @@ def _compact(factors: list) -> list:
 
 
 
-def check_inertia(document: XmlDocument, element: Element, mass: float, tensor: np.ndarray) -> None:
+def check_inertia(document: XmlDocument, element: Element, mass: float, tensor: np.ndarray, *,
+                  allow_nonphysical: bool = False) -> None:
     """ModelFileError at ``element`` unless the inertial is physical: kronlag's checks of a rigid
     body (:meth:`kronlag.RigidBody.check_values`: mass not negative, tensor positive semidefinite,
-    principal moments satisfying the triangle inequality)."""
+    principal moments satisfying the triangle inequality).  With ``allow_nonphysical`` a violated
+    triangle inequality is a :class:`RobotFileWarning` naming the element instead (the body the link
+    belongs to is checked again when the numeric model is built)."""
     body = RigidBody("inertial", mass=sp.Float(mass), inertia=sp.Matrix((tensor + tensor.T) / 2),
                      position=(0, 0, 0), rotation=sp.eye(3))
     try:
         body.check_values(lambda value, what: float(cast(SupportsFloat, value)))  # a SymPy number
     except ModelError as error:
-        raise document.error(element, "<inertial>: " + str(error).removeprefix("body 'inertial': ")) from None
+        located = document.error(element, "<inertial>: " + str(error).removeprefix("body 'inertial': "))
+        if not (allow_nonphysical and "triangle inequality" in str(error)):
+            raise located from None
+        warnings.warn(f"{located} (kept: allow_nonphysical_inertia=True)", RobotFileWarning, stacklevel=4)
 
 
 def rpy_of(rotation: np.ndarray) -> tuple[float, float, float]:
