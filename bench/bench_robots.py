@@ -20,7 +20,9 @@ relative difference is ``max |kronlag - pinocchio| / max(1, max |pinocchio|)`` o
 
 Floating-base robots (``FLOATING``: Solo 12, A1, Go2, Talos) are read with ``floating_base=True``
 and compared with Pinocchio's free flyer (:class:`FloatingReference` documents the map of the
-coordinates); Cassie's SDF row gives its loops' ranks and mobility at the reference pose.
+coordinates); Cassie's SDF row gives its loops' ranks and mobility at the reference pose and its
+constrained dynamics against ``pin.constraintDynamics`` on a Pinocchio model built from the file
+(``bench/pinocchio_sdf.py``; Python backend, FD timed against ``constraintDynamics``).
 
 With ``pip install mujoco`` two MJCF rows follow (``tests/robot_files``): the spatial arm
 ``arm.xml`` read with ``kronlag.load_mjcf`` against ``mj_fullM`` and ``qfrc_bias`` (FD timed
@@ -124,7 +126,8 @@ class PinocchioReference:
 
 
 class FloatingReference:
-    """Pinocchio's free-flyer model of a URDF and the map from kronlag's coordinates to its q and v.
+    """Pinocchio's free-flyer model of a URDF (or ``model``, built otherwise: the SDF of
+    :mod:`pinocchio_sdf`) and the map from kronlag's coordinates to its q and v.
 
     kronlag's floating base has the coordinates ``p`` (the root link's origin in the world) and the
     Euler parameters ``e = (e0, e1, e2, e3)``; Pinocchio's free flyer ``q = (p, x y z w)`` with the
@@ -138,11 +141,11 @@ class FloatingReference:
     annihilate the normalization constraint's gradient ``2 e``, so its multiplier does not enter.
     """
 
-    def __init__(self, path: Path, system: kronlag.System):
+    def __init__(self, path: Path, system: kronlag.System, model=None):
         import pinocchio as pin
 
         self.pin = pin
-        self.model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+        self.model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer()) if model is None else model
         self.data = self.model.createData()
         base = system.robot.joint("root_joint").coordinates
         index = {q.name: k for k, q in enumerate(system.coordinates)}
@@ -196,10 +199,11 @@ class FloatingReference:
                     values[joint.torque]
         return result
 
-    def compare(self, model, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> dict[str, float]:
-        """The relative differences of M, g, C qd and the accelerations at ``(q, v)``."""
+    def compare(self, model, q: np.ndarray, v: np.ndarray, tau: np.ndarray | None) -> dict[str, float]:
+        """The relative differences of M, g, C qd and (unless ``tau`` is None: a system with
+        constraints besides the normalization) the accelerations against ``aba`` at ``(q, v)``."""
         pin, peer, data = self.pin, self.model, self.data
-        S, (rotation, rates) = self.S(q), self._rotation(q)
+        S, rotation = self.S(q), self._rotation(q)[0]
         qd = S @ v
         rates_dot = self._rotation(np.where(np.isin(np.arange(len(q)), self.base[3:]), qd, 0.0))[1]
         S_dot_v = np.zeros(len(q))
@@ -210,18 +214,36 @@ class FloatingReference:
         mass = np.triu(mass) + np.triu(mass, 1).T
         gravity = pin.computeGeneralizedGravity(peer, data, pq).copy()
         bias = pin.nonLinearEffects(peer, data, pq, v).copy() - gravity
-        accelerations = pin.aba(peer, data, pq, v, tau).copy()
-        ours_mass = model.M(q)
-        qdd = model.forward_dynamics(q, qd).qdd
-        nu_dot = np.zeros(peer.nv)
-        nu_dot[:3] = rotation.T @ qdd[self.base[:3]] - np.cross(v[3:6], v[:3])
-        nu_dot[3:6] = 2 * rates @ qdd[self.base[3:]]
+        # M and C qd = f_Q - g - h from the dynamics kernel, built with the model (the M and C qd
+        # accessors are compiled on first use: for Cassie, another 25 s)
+        terms = model.dynamics_terms(q, qd)
+        ours_mass, ours_gravity = terms["M"], model.g(q)
+        ours_bias = model.f_Q(q, qd) - ours_gravity - terms["h"]
+        pairs = {"M": (S.T @ ours_mass @ S, mass), "g": (S.T @ ours_gravity, gravity),
+                 "Cqd": (S.T @ (ours_mass @ S_dot_v + ours_bias), bias)}
+        if tau is not None:
+            pairs["qdd"] = (self.accelerations(q, v, model.forward_dynamics(q, qd).qdd),
+                            pin.aba(peer, data, pq, v, tau).copy())
+        return {key: relative_difference(ours, theirs) for key, (ours, theirs) in pairs.items()}
+
+    def v(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Pinocchio's ``v`` of kronlag's speeds ``qd`` (on the constraint manifold: ``qd = S v``)."""
+        return np.linalg.lstsq(self.S(q), qd, rcond=None)[0]
+
+    def accelerations(self, q: np.ndarray, v: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """Pinocchio's accelerations of kronlag's ``qdd`` at ``(q, v)`` (see the class docstring)."""
+        rotation, rates = self._rotation(q)
+        result = np.zeros(self.model.nv)
+        result[:3] = rotation.T @ qdd[self.base[:3]] - np.cross(v[3:6], v[:3])
+        result[3:6] = 2 * rates @ qdd[self.base[3:]]
         for k, _, iv, _ in self.slots:
-            nu_dot[iv] = qdd[k]
-        pairs = {"M": (S.T @ ours_mass @ S, mass), "g": (S.T @ model.g(q), gravity),
-                 "Cqd": (S.T @ (ours_mass @ S_dot_v + model.Cqd(q, qd)), bias), "qdd": (nu_dot, accelerations)}
-        return {key: float(np.abs(ours - theirs).max()) / max(1.0, float(np.abs(theirs).max()))
-                for key, (ours, theirs) in pairs.items()}
+            result[iv] = qdd[k]
+        return result
+
+
+def relative_difference(ours: np.ndarray, theirs: np.ndarray) -> float:
+    """``max |ours - theirs| / max(1, max |theirs|)``."""
+    return float(np.abs(ours - theirs).max()) / max(1.0, float(np.abs(theirs).max()))
 
 
 def compare_floating(path: Path, system: kronlag.System, model, values: dict, *, states: int = 5,
@@ -327,18 +349,44 @@ def loop_ranks(system: kronlag.System) -> tuple[dict[str, int], int, float]:
     return ranks, len(system.coordinates) - matrix_rank(jacobian, RANK_RTOL), residual
 
 
-def run_cassie(folder: Path) -> dict:
-    """Cassie's row: load time, the loops' ranks and the mobility at the reference pose (the
-    derivation of its dynamics is not timed here: it takes too long today)."""
+def run_cassie(folder: Path, *, quick: bool) -> dict:
+    """Cassie's row: load, derive and build (the Python backend: the C build adds ~50 s of compiling to
+    ~30 s of common subexpressions), the loops' ranks and the mobility at the reference pose, and the
+    constrained dynamics against Pinocchio's model of the same file (:mod:`pinocchio_sdf`), with the
+    right foot's loop held at the reference pose (see ``tests/test_cassie_dynamics.py``); FD timed
+    against ``pin.constraintDynamics``."""
+    import pinocchio_sdf  # bench/ is on the path when this file runs as a script
+
     start = time.perf_counter()
     system = kronlag.load_sdf(folder / CASSIE)
     loaded = time.perf_counter()
     ranks, mobility, residual = loop_ranks(system)
     print(f"cassie loops: {ranks}, residual at the reference {residual:.2e}")
+    equations = kronlag.derive(system)
+    derived = time.perf_counter()
+    rng = np.random.default_rng(7)
+    values = {**system.robot.values, **{joint.torque: rng.uniform(-5, 5) for joint in system.robot.joints
+                                        if joint.torque}}
+    model = equations.numeric(values, backend="python")
+    built = time.perf_counter()
+    results = pinocchio_sdf.compare_constrained(
+        folder / CASSIE, system, model, values, held=("right-tarsus-crank-joint", "right-crank-rod-joint", "right-foot-op"),
+        dependent=("right-plantar-foot-joint.z",))
+    worst = {key: max(result[key] for result in results) for key in results[0] if key != "gap"}
+    print("cassie vs Pinocchio, max relative difference over the states: "
+          + ", ".join(f"{key} {value:.1e}" for key, value in worst.items()))
+    peer = pinocchio_sdf.build(folder / CASSIE)
+    reference = FloatingReference(folder / CASSIE, system, model=peer.model)
+    q = np.array([system.robot.q_reference[x.name] for x in system.coordinates])
+    qd, pq, tau = np.zeros(len(q)), reference.q(q), reference.tau(system, values)
+    number = 20 if quick else 2000
+    ours = per_call(lambda: model.forward_dynamics(q, qd), number=number)
+    theirs = per_call(lambda: pinocchio_sdf.constrained_accelerations(peer, pq, np.zeros(peer.model.nv), tau),
+                      number=number)
     return {"robot": "cassie_v2.sdf", "bodies": len(system.bodies), "coordinates": len(system.coordinates),
             "constraints": len(system.constraints), "mobility": mobility, "load_s": loaded - start,
-            "derive_s": float("nan"), "build_s": float("nan"), "max_rel": float("nan"), "worst": "-",
-            "fd_us": float("nan"), "aba_us": float("nan")}
+            "derive_s": derived - loaded, "build_s": built - derived, "max_rel": max(worst.values()),
+            "worst": max(worst, key=worst.get), "fd_us": ours, "aba_us": theirs}
 
 
 def per_call(function, *, number: int) -> float:
@@ -451,7 +499,7 @@ def main(argv=None) -> int:
         elif name in FLOATING:
             row = run_floating(name, folder / FLOATING[name], quick=arguments.quick)
         elif name == "cassie":
-            row = run_cassie(folder)
+            row = run_cassie(folder, quick=arguments.quick)
         elif importlib.util.find_spec("mujoco") is None:
             print(f"{name}: skipped (pip install mujoco)")
             continue

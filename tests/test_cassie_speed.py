@@ -95,5 +95,11 @@ def test_check_reports_cassie(capsys):
     out = capsys.readouterr().out
     assert "23 bodies, 29 coordinates, 12 holonomic and 0 nonholonomic constraints" in out
     assert "rows dropped as identically zero (redundant): left-plantar-foot-joint.z" in out
-    assert "right-plantar-foot-joint.z" in out and "left-pitch-rod-joint.x" in out
+    assert ("loop closed by left-pitch-rod-joint (ball, left-achilles-rod to left-hip-pitch): rows .x .y .z "
+            "(components in the frame of left-hip-pitch)") in out
     assert "degrees of freedom = 18" in out and "m - r - s = 17" in out
+    assert ("rank of each joint's or loop's rows at the assembled state: root_joint 1 of 1; left-pitch-rod-joint 3 of 3; "
+            "right-pitch-rod-joint 3 of 3; right-plantar-foot-joint 2 of 3; left-plantar-foot-joint 2 of 2") in out
+    assert "rows dependent on the others at the assembled state (redundant): right-plantar-foot-joint.z" in out
+    assert ("loop closed by left-plantar-foot-joint (ball, left-plantar-rod to left-foot): rows .x .y (components in "
+            "the frame of left-tarsus), .z dropped (identically zero)") in out

@@ -208,8 +208,8 @@ def test_mesh_bounds(tmp_path, write, suffix, expected):
 
 
 def test_mesh_search_paths(tmp_path, monkeypatch):
-    """package:// against package_paths=, ROS_PACKAGE_PATH and the file's parents; relative paths
-    against the file's directory."""
+    """package:// (and SDF's model://) against package_paths=, ROS_PACKAGE_PATH and the file's parents;
+    relative paths against the file's directory."""
     robot = tmp_path / "share" / "my_robot" / "urdf" / "r.urdf"
     mesh = tmp_path / "share" / "my_robot" / "meshes" / "a.stl"
     mesh.parent.mkdir(parents=True)
@@ -222,6 +222,8 @@ def test_mesh_search_paths(tmp_path, monkeypatch):
     assert resolve_mesh("package://my_robot/meshes/a.stl", elsewhere, [tmp_path / "share"]) == mesh
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "share"))
     assert resolve_mesh("package://my_robot/meshes/a.stl", elsewhere) == mesh
+    # SDF's model:// as package:// (example-robot-data's Cassie: model://example-robot-data/robots/...)
+    assert resolve_mesh("model://my_robot/meshes/a.stl", robot) == mesh
 
 
 BOXED = """<robot name="boxed">

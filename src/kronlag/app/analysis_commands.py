@@ -13,14 +13,13 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import ModelError
-from ..model.builtin import resolve_model
 from ..model.modelfile import ModelFile
 from ..numeric.reactions import column_unit, multiplier_labels, reaction_columns
 from ..numeric.tolerances import ZERO_EIGENVALUE_RTOL
 from ..simulation.controllers import file_controller
 from ..studies.linearization import LinearModel
 from ..studies.sweeps import SweepInterrupted, SweepResult, sweep
-from .commands import method_help, output_times
+from .commands import method_help, model_file, output_times
 from .outputs import IncompleteRun, check_writable
 from .workflows import model_units, numeric_model
 
@@ -43,7 +42,7 @@ def _check_names(assignments: dict[str, float], names: tuple[str, ...], option: 
 
 
 def _equilibrium(arguments: argparse.Namespace) -> None:
-    model = resolve_model(arguments.model)
+    model = model_file(arguments)
     numeric = numeric_model(model)
     names = numeric.coordinate_names
     guess_values, _ = model.guess_vectors()
@@ -172,7 +171,7 @@ def _sweep(arguments: argparse.Namespace) -> None:
         if output.suffix not in (".csv", ".parquet"):
             raise ModelError(f"--output {output}: the file name must end in .csv or .parquet")
         check_writable(output, "--output")
-    model = resolve_model(arguments.model)
+    model = model_file(arguments)
     grid = {name: _axis_values(model, name, values) for name, values in arguments.grid}
     settings = {name: model.parameter_value(name, value) for name, value in arguments.set or ()}
     both = sorted(settings.keys() & grid.keys())

@@ -29,6 +29,7 @@ from collections.abc import Callable, Sequence
 
 from .. import __version__
 from ..core.errors import CompilerError, InputError, NumericalError
+from ..model.robot_formats.absolute import COORDINATE_CHOICES
 from ..numeric.codegen import c_compiler
 from . import analysis_commands, commands
 from .outputs import IncompleteRun, RunInterrupted
@@ -96,6 +97,11 @@ def build_parser() -> argparse.ArgumentParser:
         sub.set_defaults(handler=handler)
         if model:
             sub.add_argument("model", metavar="MODEL", help="built-in model name or path of a TOML model file or a .urdf, .xml (MJCF) or .sdf robot file")
+            sub.add_argument("--floating-base", action="store_true",
+                             help="a URDF robot: join its root link to the world by a floating joint 'root_joint' "
+                                  "(legged robots' files leave it out)")
+            sub.add_argument("--coordinates", choices=COORDINATE_CHOICES, default="joint",
+                             help="a robot file: joint coordinates (default) or absolute body coordinates")
         return sub
 
     commands.add_commands(command)

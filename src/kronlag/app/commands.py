@@ -36,7 +36,12 @@ from .workflows import (
     summarize,
 )
 
-__all__ = ["add_commands", "ProgressBar", "positive", "count", "method_help"]
+__all__ = ["add_commands", "ProgressBar", "positive", "count", "method_help", "model_file"]
+
+
+def model_file(arguments: argparse.Namespace) -> ModelFile:
+    """The command's MODEL, a robot file read with ``--coordinates`` and ``--floating-base``."""
+    return resolve_model(arguments.model, coordinates=arguments.coordinates, floating_base=arguments.floating_base)
 
 
 #: Default output grid of ``simulate``: a point every _GRID_SPACING of simulated time, within
@@ -159,7 +164,7 @@ def _models(arguments: argparse.Namespace) -> None:
 
 
 def _derive(arguments: argparse.Namespace) -> None:
-    equations = derive(resolve_model(arguments.model).system, simplify=arguments.simplify)
+    equations = derive(model_file(arguments).system, simplify=arguments.simplify)
     emit(format_equations(equations, arguments.format), arguments.output)
 
 
@@ -169,7 +174,7 @@ def _export(arguments: argparse.Namespace) -> None:
     if arguments.fmu is not None:
         _export_fmu(arguments)
         return
-    equations = derive(resolve_model(arguments.model).system, simplify=arguments.simplify)
+    equations = derive(model_file(arguments).system, simplify=arguments.simplify)
     emit(export_code(equations, arguments.lang), arguments.output)
 
 
@@ -178,7 +183,7 @@ def _export_fmu(arguments: argparse.Namespace) -> None:
     assembled initial state, ``t_end`` and ``rtol``."""
     from ..views.fmu import export_fmu
 
-    model = resolve_model(arguments.model)
+    model = model_file(arguments)
     numeric = numeric_model(model)
     q0, qd0 = initial_state(model, numeric)
     path = export_fmu(numeric, arguments.fmu, q0=q0, qd0=qd0, stop_time=model.simulation.t_end,
@@ -188,7 +193,7 @@ def _export_fmu(arguments: argparse.Namespace) -> None:
 
 
 def _check(arguments: argparse.Namespace) -> None:
-    model = resolve_model(arguments.model)
+    model = model_file(arguments)
     check = check_model(model)
     if check.assembly_error:  # bad input: the file's [initial] state is not a state of the mechanism
         print(check.report())
@@ -259,7 +264,7 @@ def _failure_hint(message: str) -> str:
 
 
 def _simulate(arguments: argparse.Namespace) -> None:
-    model = resolve_model(arguments.model)
+    model = model_file(arguments)
     if arguments.reactions is not None and arguments.plot is None:
         raise ModelError("--reactions selects what --plot draws: give --plot FILE too")
     outputs = requested_outputs(_SIMULATION_OUTPUTS, arguments, model)
@@ -295,7 +300,7 @@ def _drives(arguments: argparse.Namespace, model: ModelFile) -> dict:
 
 def _driven_run(arguments: argparse.Namespace, outputs_table, run_along, what: str, suffix: str, **options) -> None:
     """Run ``run_along(model, drives, times, **options)``, report it and write the outputs."""
-    model = resolve_model(arguments.model)
+    model = model_file(arguments)
     outputs = requested_outputs(outputs_table, arguments, model)
     drives = _drives(arguments, model)
     t_end = model.simulation.t_end if arguments.t_end is None else arguments.t_end

@@ -24,7 +24,7 @@ from ..model.modelfile import ModelFile, PrescribedMotion
 from ..model.modelfile.units import si_unit
 from ..model.symbols import t
 from ..model.system import drive_name
-from ..numeric.tolerances import matrix_rank
+from ..numeric.tolerances import matrix_rank, numerical_rank, rank_magnitudes
 from ..simulation.controllers import file_controller
 from ..simulation.simulate import simulate
 from ..simulation.trajectory import LimitEvent, StictionEvent
@@ -38,6 +38,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ModelCheck",
+    "ConstraintGroup",
+    "constraint_ranks",
     "check_model",
     "numeric_model",
     "initial_state",
@@ -81,6 +83,14 @@ class ModelCheck:
         (:func:`initial_state`); ``None`` when it was not tried (values missing) or failed.
     assembly_error : str
         Why the initial state cannot be assembled (the unsatisfied constraint rows); empty if it can.
+    constraint_groups : tuple of ConstraintGroup
+        The holonomic rows by joint or loop and their ranks at the assembled state (with
+        :attr:`dependent_rows`; empty when it was not assembled); reported when some group has
+        several rows.
+    dependent_rows : tuple of str
+        The rows the rank policy counts dependent on the others there (as many as the solver drops,
+        :func:`~kronlag.numeric.tolerances.rank_magnitudes`): those nearest to the span of the rows
+        before them in the system's order.
     """
 
     name: str
@@ -95,6 +105,8 @@ class ModelCheck:
     constraint_residual: float | None
     assembly_correction: tuple[float, float] | None = None
     assembly_error: str = ""
+    constraint_groups: tuple[ConstraintGroup, ...] = ()
+    dependent_rows: tuple[str, ...] = ()
 
     def report(self) -> str:
         """A few lines of text for people."""
@@ -116,6 +128,16 @@ class ModelCheck:
         elif self.assembly_correction is not None:
             lines.append("initial state assembled: max |q0 - guess| = {:.3g}, max |qd0 - guess| = {:.3g}"
                          .format(*self.assembly_correction))
+        if len(self.constraint_groups) > 1 and any(len(group.rows) > 1 for group in self.constraint_groups):
+            shown = [group for group in self.constraint_groups
+                     if len(self.constraint_groups) <= _LISTED_GROUPS or group.rank < len(group.rows)]
+            unlisted = len(self.constraint_groups) - len(shown)
+            lines.append("rank of each joint's or loop's rows at the assembled state: " + "; ".join(
+                f"{group.name} {group.rank} of {len(group.rows)}" for group in shown)
+                + (f"{'; ' if shown else ''}{unlisted} more of full rank" if unlisted else ""))
+        if self.dependent_rows:
+            lines.append("rows dependent on the others at the assembled state (redundant): "
+                         + ", ".join(self.dependent_rows))
         return "\n".join(lines)
 
     def _freedom_line(self) -> str:
@@ -128,6 +150,40 @@ class ModelCheck:
 
 #: :attr:`ModelCheck.mobility_at` when the mobility could not be counted at an assembled state.
 _NAIVE = "m - r - s"
+
+
+#: :meth:`ModelCheck.report` lists every group's rank up to this many groups, beyond it the deficient ones.
+_LISTED_GROUPS = 20
+
+
+@dataclass(frozen=True)
+class ConstraintGroup:
+    """The holonomic rows of one joint or loop (named ``"<group>.<row>"``; a row without a dot is a
+    group of its own) and their rank at the assembled state."""
+
+    name: str
+    rows: tuple[str, ...]
+    rank: int
+
+
+def constraint_ranks(names: Sequence[str], jacobian: np.ndarray,
+                     rank_rtol: float) -> tuple[tuple[ConstraintGroup, ...], tuple[str, ...]]:
+    """The rows ``names`` of ``jacobian`` (``Phi_q``) grouped by the name before their last dot, each
+    group's rank, and the rows dependent on the others (:attr:`ModelCheck.dependent_rows`)."""
+    groups: dict[str, list[int]] = {}
+    for index, name in enumerate(names):
+        groups.setdefault(name.rsplit(".", 1)[0], []).append(index)
+    ranked = tuple(ConstraintGroup(group, tuple(names[i] for i in rows), matrix_rank(jacobian[rows], rank_rtol))
+                   for group, rows in groups.items())
+    count = len(names) - numerical_rank(rank_magnitudes(jacobian)[0], rank_rtol)
+    if not count:
+        return ranked, ()
+    # which rows: those farthest inside the span of the rows before them (|diag R| of the QR of Phi_q^T
+    # in the system's order), as many as the rank policy counts dependent
+    distances = np.zeros(len(names))
+    diagonal = np.abs(np.diag(np.linalg.qr(jacobian.T, mode="r")))
+    distances[:len(diagonal)] = diagonal
+    return ranked, tuple(names[i] for i in sorted(np.argsort(distances, kind="stable")[:count]))
 
 
 def check_model(model: ModelFile, *, equations: Equations | None = None) -> ModelCheck:
@@ -155,6 +211,8 @@ def check_model(model: ModelFile, *, equations: Equations | None = None) -> Mode
         rank_phi, rank_a = (matrix_rank(at_guess[name]) for name in ("Phi_q", "A"))  # no model yet: default rtol
         residual = float(np.max(np.abs(at_guess["Phi"]), initial=0.0))
     freedom, at, correction, failure = m - r - s, _NAIVE, None, ""
+    groups: tuple[ConstraintGroup, ...] = ()
+    dependent: tuple[str, ...] = ()
     if not missing:
         numeric = numeric_model(model, equations=eom)
         q, qd = (np.asarray(x, dtype=float) for x in model.guess_vectors())
@@ -166,9 +224,13 @@ def check_model(model: ModelFile, *, equations: Equations | None = None) -> Mode
             correction = (float(np.max(np.abs(q0 - q), initial=0.0)), float(np.max(np.abs(qd0 - qd), initial=0.0)))
             if r + s:
                 freedom, at = numeric.mobility(q0), "the assembled state"
+            if r:
+                groups, dependent = constraint_ranks([c.name for c in system.constraints], numeric.Phi_q(q0),
+                                                     numeric.rank_rtol)
     return ModelCheck(name=system.name, m=m, r=r, s=s, degrees_of_freedom=freedom, mobility_at=at,
                       missing_values=missing, rank_Phi_q=rank_phi, rank_A=rank_a, constraint_residual=residual,
-                      assembly_correction=correction, assembly_error=failure)
+                      assembly_correction=correction, assembly_error=failure, constraint_groups=groups,
+                      dependent_rows=dependent)
 
 
 # -- numeric set-up -------------------------------------------------------------------

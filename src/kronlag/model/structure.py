@@ -27,7 +27,9 @@ def describe(system: System) -> str:
     constraints by name, and the Grübler count ``m - r - s``.
 
     A system read from a robot file (``system.robot``) lists the file's joints: the moving ones
-    (one coordinate each; floating, ball, planar and universal joints several), the fixed ones (merged into a body) and the mimic joints (a constraint).
+    (one coordinate each; floating, ball, planar and universal joints several), the fixed ones (merged into a body) and the mimic joints (a constraint);
+    each joint that closes a loop with its rows, the frame of their components and its rows dropped.
+    The ranks of each joint's or loop's rows at the assembled state need numbers: ``kronlag check``.
     """
     m, r, s = len(system.coordinates), len(system.constraints), len(system.nonholonomic_constraints)
     robot = getattr(system, "robot", None)
@@ -54,6 +56,13 @@ def describe(system: System) -> str:
         lines.append(f"constraint joints: {len(system.joints)} ({_counted(Counter(j.kind for j in system.joints))}): "
                      + ", ".join(f"{joint.name} ({len(joint.constraint_names)} rows)" for joint in system.joints))
     named = {name for joint in system.joints for name in joint.constraint_names}
+    for loop in robot.loops if robot is not None else ():
+        suffixes = " ".join("." + row.rsplit(".", 1)[1] for row in loop.rows)
+        dropped = " ".join("." + row.rsplit(".", 1)[1] for row in loop.dropped)
+        lines.append(f"loop closed by {loop.joint} ({loop.kind}, {loop.parent} to {loop.child}): rows {suffixes} "
+                     f"(components in the frame of {loop.frame})" + (f", {dropped} dropped (identically zero)"
+                                                                     if dropped else ""))
+        named.update(loop.rows)
     normalizing = [c.name for c in system.constraints if robot is not None and c.name.endswith(".normalization")]
     if normalizing:
         lines.append("Euler-parameter normalizations (floating and ball joints): " + ", ".join(normalizing))

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 
-from ...core.errors import ModelError
+from ...core.errors import InputError, ModelError
 from ..modelfile import ModelFile, load_model
 from ..modelfile.model_file import settle_drives
 from ..modelfile.reader import ROBOT_SUFFIXES
@@ -114,10 +114,14 @@ def load_example(name: str, *, apply_drives: bool | None = None) -> ModelFile:
     return settle_drives(model, apply_drives)
 
 
-def resolve_model(model: str | Path) -> ModelFile:
-    """A model given as a path to a TOML file or as the name of a built-in model or example, its
-    ``[[drives]]`` left out of the system (the command line applies them where it uses them)."""
+def resolve_model(model: str | Path, *, coordinates: str = "joint", floating_base: bool = False) -> ModelFile:
+    """A model given as a path to a TOML file or robot file or as the name of a built-in model or
+    example, its ``[[drives]]`` left out of the system (the command line applies them where it uses
+    them); ``coordinates`` and ``floating_base`` as :func:`~kronlag.model.modelfile.load_model` takes them."""
     path = Path(model)
     if path.suffix in (".toml", *ROBOT_SUFFIXES) or path.exists():
-        return load_model(path, apply_drives=False)
+        return load_model(path, apply_drives=False, coordinates=coordinates, floating_base=floating_base)
+    if coordinates != "joint" or floating_base:
+        raise InputError(f"{model}: --coordinates and --floating-base apply to robot files "
+                         f"({', '.join(ROBOT_SUFFIXES)}), not to a built-in model")
     return load_example(str(model), apply_drives=False)

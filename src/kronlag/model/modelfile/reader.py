@@ -14,7 +14,7 @@ from typing import Any
 
 import sympy as sp
 
-from ...core.errors import ExpressionError, ModelError, ModelFileError
+from ...core.errors import ExpressionError, InputError, ModelError, ModelFileError
 from ..bodies import BODY_TYPES, Body
 from ..expressions import RESERVED_NAMES, parse_expression
 from ..friction import FRICTION_FIELDS, Friction
@@ -460,8 +460,11 @@ def loads_model(text: str, *, source: str = "<string>") -> ModelFile:
     return _read(document, source)
 
 
-def load_model(path: str | Path, *, apply_drives: bool | None = None) -> ModelFile:
-    """Read a model file (TOML; the format is described in the module docstring).
+def load_model(path: str | Path, *, apply_drives: bool | None = None, coordinates: str = "joint",
+               floating_base: bool = False) -> ModelFile:
+    """Read a model file (TOML; the format is described in the module docstring) or a robot file
+    (``.urdf``, ``.xml`` MJCF, ``.sdf``: :func:`~kronlag.model.robot_formats.load_robot`, with its
+    options ``coordinates="absolute"`` and, for a URDF, ``floating_base=True``).
 
     A file's ``[[drives]]`` prescribe motions for kinematic analysis and inverse dynamics;
     they are kept in :attr:`ModelFile.drives`, out of the system, unless ``apply_drives``
@@ -477,7 +480,10 @@ def load_model(path: str | Path, *, apply_drives: bool | None = None) -> ModelFi
     """
     path = Path(path)
     if path.suffix.lower() in ROBOT_SUFFIXES:
-        return _robot_model(path)
+        return _robot_model(path, coordinates=coordinates, floating_base=floating_base)
+    if coordinates != "joint" or floating_base:
+        raise InputError(f"{path}: coordinates= and floating_base= apply to robot files "
+                         f"({', '.join(ROBOT_SUFFIXES)}), not to a model file")
     return settle_drives(loads_model(read_bounded(path), source=str(path)), apply_drives)
 
 
@@ -485,10 +491,10 @@ def load_model(path: str | Path, *, apply_drives: bool | None = None) -> ModelFi
 ROBOT_SUFFIXES = tuple(ROBOT_READERS)
 
 
-def _robot_model(path: Path) -> ModelFile:
-    """A robot file (URDF, MJCF) as a model file: its system, ``g`` (9.81 or the file's), actuator
+def _robot_model(path: Path, *, coordinates: str, floating_base: bool) -> ModelFile:
+    """A robot file (URDF, MJCF, SDF) as a model file: its system, ``g`` (9.81 or the file's), actuator
     torques 0, the reference pose as the assembly guess."""
-    system = load_robot(path)
+    system = load_robot(path, coordinates=coordinates, floating_base=floating_base)
     robot = system.robot
     return ModelFile(system, description=f"{robot.format.upper()} robot {system.name!r} ({path.name})",
                      values={name: sp.Float(value) for name, value in robot.values.items()},

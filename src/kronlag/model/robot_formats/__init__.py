@@ -6,6 +6,7 @@ file's extra data is a :class:`~kronlag.model.robot_formats.description.RobotDes
 
 from pathlib import Path
 
+from ...core.errors import InputError
 from ..system import System
 from .description import RobotDescription, RobotFileWarning, RobotJoint, Visual
 from .mjcf import load_mjcf
@@ -20,6 +21,18 @@ ROBOT_READERS = {".urdf": load_urdf, ".xacro": load_urdf, ".xml": load_mjcf, ".m
                  ".sdf": load_sdf}
 
 
-def load_robot(path: str | Path) -> System:
-    """The robot file ``path`` read by the reader of its suffix (:data:`ROBOT_READERS`)."""
-    return ROBOT_READERS[Path(path).suffix.lower()](path)
+def load_robot(path: str | Path, *, coordinates: str = "joint", floating_base: bool = False) -> System:
+    """The robot file ``path`` read by the reader of its suffix (:data:`ROBOT_READERS`).
+
+    ``coordinates`` (``"joint"`` or ``"absolute"``) as every reader takes it; ``floating_base=True``
+    joins a URDF's root link to the world by the floating joint ``"root_joint"``
+    (:func:`load_urdf`).  MJCF and SDF files say themselves whether the robot floats (a ``freejoint``;
+    a model whose root link no joint fixes to the world), so there it is an InputError.
+    """
+    reader = ROBOT_READERS[Path(path).suffix.lower()]
+    if not floating_base:
+        return reader(path, coordinates=coordinates)
+    if reader is not load_urdf:
+        raise InputError(f"{path}: floating_base applies to URDF files only; an MJCF or SDF file says whether the "
+                         "robot floats (a <freejoint>; a model whose root link no joint fixes to the world)")
+    return load_urdf(path, coordinates=coordinates, floating_base=True)

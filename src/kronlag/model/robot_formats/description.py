@@ -16,7 +16,8 @@ import numpy as np
 from ...core.errors import KronlagWarning
 from ..frames import Frame
 
-__all__ = ["RobotFileWarning", "JointLimits", "RobotJoint", "Visual", "RobotDescription", "coordinate_name"]
+__all__ = ["RobotFileWarning", "JointLimits", "RobotJoint", "LoopClosure", "Visual", "RobotDescription",
+           "coordinate_name"]
 
 
 class RobotFileWarning(KronlagWarning):
@@ -76,6 +77,33 @@ class RobotJoint:
 
 
 @dataclass(frozen=True)
+class LoopClosure:
+    """A joint of the file that closes a loop (an SDF joint whose child is already in the tree).
+
+    Attributes
+    ----------
+    joint, kind, parent, child : str
+        The joint's name and type, its parent and child links.
+    frame : str
+        The link in whose frame the rows' components are (the loop's nearest common ancestor link):
+        the multipliers of ``.x .y .z`` are the force on the parent link at the joint point, the
+        negative of the force on the child link, in that frame.
+    rows : tuple of str
+        The constraints added (``"<joint>.x"``, ...).
+    dropped : tuple of str
+        Its rows dropped as identically zero (also in :attr:`RobotDescription.redundant`).
+    """
+
+    joint: str
+    kind: str
+    parent: str
+    child: str
+    frame: str
+    rows: tuple[str, ...]
+    dropped: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class Visual:
     """Visual geometry of a link: ``shape`` is ``box`` (``size`` = 3 edge lengths), ``cylinder``
     (radius, length), ``sphere`` (radius), ``capsule`` (radius, length) or ``mesh`` (a named
@@ -119,6 +147,8 @@ class RobotDescription:
     redundant : list of str
         Constraint rows of the file dropped as identically zero (a planar MJCF ``connect``'s
         out-of-plane row).
+    loops : tuple of LoopClosure
+        The joints that close loops (SDF), in file order.
     joint_values : dict of str to sympy.Expr
         Each moving joint's value (angle or slide) as an expression of the coordinates: its
         coordinate in joint coordinates; in absolute body coordinates (:mod:`.absolute`) the angle
@@ -137,6 +167,7 @@ class RobotDescription:
     q_reference: dict[str, float] = field(default_factory=dict)
     skipped: str = ""
     redundant: list[str] = field(default_factory=list)
+    loops: tuple[LoopClosure, ...] = ()
     joint_values: dict[str, Any] = field(default_factory=dict)
 
     def joint(self, name: str) -> RobotJoint:

@@ -5,9 +5,10 @@ A mesh ``filename`` is searched for, in this order (:func:`search_roots`):
 
 1. an absolute path or ``file://`` URL as written;
 2. a relative path against the robot file's directory;
-3. ``package://PACKAGE/rest``: for each search root ``S`` - the ``package_paths=`` given to the
-   loader, then the entries of ``ROS_PACKAGE_PATH``, then the robot file's directory and each of its
-   parents - ``S/PACKAGE/rest``, or ``S/rest`` where ``S`` itself is named ``PACKAGE``.
+3. ``package://PACKAGE/rest`` (and SDF's ``model://MODEL/rest`` alike): for each search root ``S`` -
+   the ``package_paths=`` given to the loader, then the entries of ``ROS_PACKAGE_PATH``, then the
+   robot file's directory and each of its parents - ``S/PACKAGE/rest``, or ``S/rest`` where ``S``
+   itself is named ``PACKAGE``.
 
 Meshes are data, read for their vertices only: binary and ASCII STL, Wavefront OBJ (``v`` lines)
 and COLLADA (``.dae``: the ``POSITION`` arrays of the geometries the visual scene instances, placed
@@ -50,7 +51,7 @@ def resolve_mesh(filename: str, source: str | Path, package_paths: Sequence[str 
     """The file a mesh ``filename`` of the robot file ``source`` names (see the module docstring),
     ``None`` if it is not found."""
     url = urlparse(filename)
-    if url.scheme == "package":
+    if url.scheme in ("package", "model"):
         package, rest = url.netloc, unquote(url.path).lstrip("/")
         for root in search_roots(source, package_paths):
             for candidate in (root / package / rest, root / rest if root.name == package else None):

@@ -13,12 +13,14 @@ Joints are read in file order: the first joint naming a link as its child places
 ``fixed``: merged; see :mod:`.tree`), and a joint
 whose child is already in the tree closes a loop: its constraints are added by name -
 ``"<joint>.x"``, ``.y``, ``.z`` (the joint point of both links stays together, components in the
-frame of the loop's nearest common ancestor link; ``ball``),
+frame of the loop's nearest common ancestor link; ``ball``; their multipliers are the force on the
+parent link at the joint point, in that frame),
 ``.axis1``, ``.axis2`` (``revolute``: the axis of the child stays along the parent's), ``.cross``
 (``universal``: the two axes stay perpendicular), ``.rx .ry .rz`` (``fixed``).  Rows that are
 identically zero (the out-of-plane rows of a planar loop) are dropped and listed in
-``system.robot.redundant``.  A model whose root link no joint fixes to ``world`` has a floating
-base: the joint ``"root_joint"`` (``root_joint_x, _y, _z`` from the root link's pose in the file
+``system.robot.redundant``; ``system.robot.loops`` describes each loop-closing joint
+(:class:`~.description.LoopClosure`: its rows, dropped rows and frame).  A model whose root link
+no joint fixes to ``world`` has a floating base: the joint ``"root_joint"`` (``root_joint_x, _y, _z`` from the root link's pose in the file
 and the Euler parameters ``root_joint_e0 .. _e3``, with ``"root_joint.normalization"``).
 """
 
@@ -32,11 +34,11 @@ import numpy as np
 import sympy as sp
 
 from ..system import System
-from .description import JointLimits
+from .description import JointLimits, LoopClosure
 from .mjcf import add_rows
 from .safe_xml import XmlDocument, numbers, read_xml
 from .tree import (NO_MASS, Inertial, TreeJoint, VisualSpec, at_reference, build_system, check_inertia,
-                   orientation_rows, relative_frames, report_skipped, rpy_matrix, rpy_of)
+                   common_ancestor, orientation_rows, relative_frames, report_skipped, robot_of, rpy_matrix, rpy_of)
 
 __all__ = ["load_sdf"]
 
@@ -288,4 +290,10 @@ def _close(document: XmlDocument, system: System, joint: Element, name: str, pos
     elif kind == "fixed":
         relative = at_reference(system, rotation_p).T @ at_reference(system, rotation_c)
         rows += orientation_rows(rotation_p, relative, rotation_c)
+    robot = robot_of(system)
+    dropped_before = len(robot.redundant)
     add_rows(document, system, joint, name, rows)
+    dropped = tuple(robot.redundant[dropped_before:])
+    robot.loops += (LoopClosure(name, str(kind), parent, child, common_ancestor(system, parent, child),
+                                tuple(f"{name}.{suffix}" for suffix, _ in rows if f"{name}.{suffix}" not in dropped),
+                                dropped),)

@@ -53,7 +53,7 @@ def three(values: Sequence[float]) -> tuple[float, float, float]:
     x, y, z = values
     return x, y, z
 
-__all__ = ["Inertial", "NO_MASS", "JOINT_COORDINATES", "TreeJoint", "at_reference", "relative_frames", "build_system", "check_inertia", "combine", "moved",
+__all__ = ["Inertial", "NO_MASS", "JOINT_COORDINATES", "TreeJoint", "at_reference", "common_ancestor", "relative_frames", "build_system", "check_inertia", "combine", "moved",
            "orientation_rows", "report_skipped", "rpy_matrix", "rpy_of", "transform"]
 
 
@@ -249,8 +249,7 @@ _PRINCIPAL = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1)}
 
 def _matrix_factors(matrix: np.ndarray) -> list:
     """A constant rotation matrix as (at most three) factors ``Rz(yaw) Ry(pitch) Rx(roll)``."""
-    yaw, pitch, roll = (float(np.arctan2(matrix[1, 0], matrix[0, 0])), float(np.arcsin(np.clip(-matrix[2, 0], -1, 1))),
-                        float(np.arctan2(matrix[2, 1], matrix[2, 2])))
+    roll, pitch, yaw = rpy_of(matrix)
     return rpy_factors(roll, pitch, yaw)
 
 
@@ -274,21 +273,29 @@ def _compact(factors: list) -> list:
 
 
 
-def check_inertia(document: XmlDocument, element: Element, mass: float, tensor: np.ndarray) -> None:
+def check_inertia(document: XmlDocument, element: Element, mass: float, tensor: np.ndarray, *,
+                  allow_nonphysical: bool = False) -> None:
     """ModelFileError at ``element`` unless the inertial is physical: kronlag's checks of a rigid
     body (:meth:`kronlag.RigidBody.check_values`: mass not negative, tensor positive semidefinite,
-    principal moments satisfying the triangle inequality)."""
+    principal moments satisfying the triangle inequality).  With ``allow_nonphysical`` a violated
+    triangle inequality is a :class:`RobotFileWarning` naming the element instead (the body the link
+    belongs to is checked again when the numeric model is built)."""
     body = RigidBody("inertial", mass=sp.Float(mass), inertia=sp.Matrix((tensor + tensor.T) / 2),
                      position=(0, 0, 0), rotation=sp.eye(3))
     try:
         body.check_values(lambda value, what: float(cast(SupportsFloat, value)))  # a SymPy number
     except ModelError as error:
-        raise document.error(element, "<inertial>: " + str(error).removeprefix("body 'inertial': ")) from None
+        located = document.error(element, "<inertial>: " + str(error).removeprefix("body 'inertial': "))
+        if not (allow_nonphysical and "triangle inequality" in str(error)):
+            raise located from None
+        warnings.warn(f"{located} (kept: allow_nonphysical_inertia=True)", RobotFileWarning, stacklevel=4)
 
 
 def rpy_of(rotation: np.ndarray) -> tuple[float, float, float]:
     """``(roll, pitch, yaw)`` with ``rpy_matrix(roll, pitch, yaw) == rotation`` (to rounding)."""
-    return (float(np.arctan2(rotation[2, 1], rotation[2, 2])), float(np.arcsin(np.clip(-rotation[2, 0], -1, 1))),
+    # the pitch by arctan2, not arcsin(-R[2, 0]): near +-pi/2 (Cassie's 1.5708) arcsin loses half the digits
+    return (float(np.arctan2(rotation[2, 1], rotation[2, 2])),
+            float(np.arctan2(-rotation[2, 0], np.hypot(rotation[0, 0], rotation[1, 0]))),
             float(np.arctan2(rotation[1, 0], rotation[0, 0])))
 
 
@@ -459,20 +466,27 @@ def robot_of(system: System) -> RobotDescription:
     return system.robot
 
 
+def _path_to_root(local: dict[str, tuple[str, Frame]], link: str) -> list[str]:
+    links = [link]
+    while links[-1] in local:
+        links.append(local[links[-1]][0])
+    return links
+
+
+def common_ancestor(system: System, first: str, second: str) -> str:
+    """The nearest link that both ``first`` and ``second`` descend from (or are)."""
+    local = robot_of(system).local_frames
+    second_path = _path_to_root(local, second)
+    return next(link for link in _path_to_root(local, first) if link in second_path)
+
+
 def relative_frames(system: System, first: str, second: str) -> tuple[Frame, Frame]:
     """The frames of the links ``first`` and ``second`` in the frame of their nearest common ancestor
     link: expressions of the joints between them only (a loop's constraints written so stay small;
     in the world frame they would hold every joint from the root, the floating base's among them)."""
     local = robot_of(system).local_frames
-
-    def path(link: str) -> list[str]:
-        links = [link]
-        while links[-1] in local:
-            links.append(local[links[-1]][0])
-        return links
-
-    first_path, second_path = path(first), path(second)
-    ancestor = next(link for link in first_path if link in second_path)
+    first_path, second_path = _path_to_root(local, first), _path_to_root(local, second)
+    ancestor = common_ancestor(system, first, second)
 
     def frame(links: list[str]) -> Frame:
         origin, rotation = sp.zeros(3, 1), sp.eye(3)

@@ -66,9 +66,9 @@ def _origin(document: XmlDocument, element: Element) -> tuple[float, ...]:
 
 
 
-def _inertial(document: XmlDocument, link: Element) -> Inertial:
+def _inertial(document: XmlDocument, link: Element, allow_nonphysical: bool) -> Inertial:
     """The link's inertial in its frame, checked physical (mass >= 0, tensor positive semidefinite with
-    the triangle inequality); no ``<inertial>``: no mass."""
+    the triangle inequality, which ``allow_nonphysical`` turns into a warning); no ``<inertial>``: no mass."""
     inertial = link.find("inertial")
     if inertial is None:
         return NO_MASS
@@ -81,7 +81,7 @@ def _inertial(document: XmlDocument, link: Element) -> Inertial:
     xx, xy, xz, yy, yz, zz = (document.number(tensor_element, key)
                               for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))
     tensor = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
-    check_inertia(document, link, mass, tensor)
+    check_inertia(document, link, mass, tensor, allow_nonphysical=allow_nonphysical)
     origin = _origin(document, inertial)
     rotation = rpy_matrix(*origin[3:])
     return Inertial(mass, np.array(origin[:3]), rotation @ tensor @ rotation.T)
@@ -147,7 +147,7 @@ def _joint(document: XmlDocument, element: Element) -> TreeJoint:
 
 
 def load_urdf(path: str | Path, *, coordinates: str = "joint", package_paths: Sequence[str | Path] = (),
-              floating_base: bool = False) -> System:
+              floating_base: bool = False, allow_nonphysical_inertia: bool = False) -> System:
     """Read a URDF file into a :class:`~kronlag.System` in joint coordinates (see the module docstring).
 
     Parameters
@@ -163,6 +163,12 @@ def load_urdf(path: str | Path, *, coordinates: str = "joint", package_paths: Se
         Pinocchio's ``JointModelFreeFlyer``; legged robots' files leave it out); its coordinates
         ``root_joint_x, _y, _z`` are the root link's origin in the world and ``root_joint_e0 ..
         _e3`` its orientation.
+    allow_nonphysical_inertia : bool
+        Keep an ``<inertial>`` whose principal moments violate the triangle inequality, with a
+        :class:`~.description.RobotFileWarning` naming the link, instead of refusing the file
+        (example-robot-data's Go1, ANYmal and HyQ have such a placeholder on a massless ``base``
+        link, merged by a fixed joint into the trunk).  The bodies are checked again when the
+        numeric model is built: a body that is still not physical is refused there.
 
     Returns
     -------
@@ -200,7 +206,8 @@ def load_urdf(path: str | Path, *, coordinates: str = "joint", package_paths: Se
             specs.append(TreeJoint(robot, ROOT_JOINT, "floating", world, roots[0], (0.0,) * 6, (1.0, 0.0, 0.0)))
             links = {world: robot, **links}
     system = build_system(document, name=robot.get("name") or Path(path).stem, file_format="urdf", links=links,
-                          inertials={name: _inertial(document, element) if element.tag == "link" else NO_MASS
+                          inertials={name: _inertial(document, element, allow_nonphysical_inertia)
+                                     if element.tag == "link" else NO_MASS
                                      for name, element in links.items()},
                           specs=specs, visuals=[(name, *visual) for name, element in links.items()
                                                 for visual in _visuals(document, element)],
