@@ -45,7 +45,13 @@ if TYPE_CHECKING:
 #: drivers' message too: :func:`kronlag.simulation.drivers.segment_status`).
 NOT_FINITE = "the state is not finite (the integration diverged before: not a singular configuration)"
 
-__all__ = ["NumericModel", "BATCH_MATRICES"]
+__all__ = ["NumericModel", "BATCH_MATRICES", "BUILD_HOOKS"]
+
+#: Called with every model built on the C backend, once its kernels are compiled: the simulation
+#: layer registers here the compiling of what its default method runs
+#: (:func:`kronlag.simulation.drivers.build_default_driver`), so that a model's first ``simulate``
+#: compiles nothing.  A hook defers its failures to the run that needs what it builds.
+BUILD_HOOKS: list[Callable[[NumericModel], None]] = []
 
 #: The matrices :meth:`NumericModel.evaluate_batch` evaluates (the accessors of the catalogue).
 BATCH_MATRICES = catalogue.ACCESSORS
@@ -138,6 +144,9 @@ class NumericModel(MatrixAccessors):
             self._dynamics = self._library("dynamics")
         self._forward = self._dynamics.forward_dynamics_function()
         self._warned_redundant = False
+        if self.backend == "c":
+            for hook in BUILD_HOOKS:
+                hook(self)
 
     # -- parameters -----------------------------------------------------------------------
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..core.errors import CompilerError, InputError
 from ..numeric import codegen
-from ..numeric.numeric_model import NOT_FINITE
+from ..numeric.numeric_model import BUILD_HOOKS, NOT_FINITE
 from ..numeric.tolerances import numerical_rank
 from .controllers import ControlledModel
 from .interface import DriverOptions, GapFunction, c_declarations, doubles
@@ -153,6 +153,22 @@ def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
             names.argtypes, names.restype = [ctypes.c_int], ctypes.c_char_p
         libraries[kind] = library
     return libraries[kind]
+
+
+def build_default_driver(model: NumericModel) -> None:
+    """Compile and load the CVODE driver of ``model`` (the default method's, away from singular
+    configurations) when the model is built (:data:`~kronlag.numeric.numeric_model.BUILD_HOOKS`);
+    a model with time-varying parameters (which runs in Python) is skipped, and a failure (no
+    scikit-sundae, a compiler error) is left to the first run that needs the driver, which reports it."""
+    if model.time_varying:
+        return
+    try:
+        driver(model, "cvode")
+    except (CompilerError, ImportError):
+        pass
+
+
+BUILD_HOOKS.append(build_default_driver)
 
 
 def passage(model: NumericModel, record: np.ndarray) -> SingularPassage:
