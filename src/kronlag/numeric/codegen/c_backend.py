@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import symengine as se
 
+from ...core.errors import CompilerError
 from ...core.kernels import PLACEHOLDER, Kernel, literal
 from ...model.friction import record_size
 from ..tolerances import RANK_RTOL, c_macros
@@ -159,10 +160,14 @@ class CLibrary:
     :mod:`ctypes` with per-call buffers (so both are safe from several threads);
     batched calls through :mod:`ctypes` (which releases the GIL) into
     ``numeric/codegen/c/kernel_batch.c``.  With a ``"dynamics"`` kernel the library also holds the
-    solver of the augmented system (``numeric/codegen/c/augmented.c``).
+    solver of the augmented system (``numeric/codegen/c/augmented.c``).  ``extensions``: pairs of C
+    appended to :attr:`source` in the library and the shared libraries it links, or None (a compiled
+    integrator's driver, :data:`~kronlag.numeric.numeric_model.LIBRARY_EXTENSIONS`); :attr:`source` stays
+    the kernels' and the solver's.
     """
 
-    def __init__(self, kernels: Sequence[Kernel], *, m: int, n_parameters: int, rank_rtol: float = RANK_RTOL):
+    def __init__(self, kernels: Sequence[Kernel], *, m: int, n_parameters: int, rank_rtol: float = RANK_RTOL,
+                 extensions: Sequence[tuple[str, tuple[Path, ...]] | None] = ()):
         self.kernels = {kernel.name: kernel for kernel in kernels}
         self.m, self.n_parameters = m, n_parameters
         parts, chunks = [_C_PREAMBLE], 1
@@ -179,8 +184,7 @@ class CLibrary:
                          + friction_header(self.kernels.get("friction"), m))
             parts.append(c_file("linalg.c") + c_file("augmented.c") + c_file("forward_dynamics_batch.c") + "#endif\n")
         self.source = "\n".join(parts)
-        # part 0 (the solver) is small: one process per core for the kernel chunks besides it
-        self.library = load_shared_library(self.source, parts=library_parts(self.source))
+        self.library = self._load([extension for extension in extensions if extension is not None])
         self.functions = {}
         for name in self.kernels:
             function = getattr(self.library, f"kronlag_{name}")
@@ -199,6 +203,20 @@ class CLibrary:
             self._forward_batch.argtypes = [_LONG, _LONG, _POINTER, _LONG, _POINTER, _POINTER, _POINTER, _LONG,
                                             ctypes.c_double, ctypes.c_double, _POINTER, _POINTER, ctypes.c_int]
             self._forward_batch.restype = None
+
+    def _load(self, extensions: list[tuple[str, tuple[Path, ...]]]) -> ctypes.CDLL:
+        """The library of :attr:`source` with the ``extensions`` appended (compiled in part 0, with the
+        solver, while the kernel parts compile), or without them should that fail: the model's own
+        errors are then the ones raised, and the run that needs an extension reports its failure."""
+        # part 0 (the solver) is small: one process per core for the kernel chunks besides it
+        if extensions:
+            extended = self.source + "".join(code for code, _ in extensions)
+            try:
+                return load_shared_library(extended, parts=library_parts(extended),
+                                           libraries=tuple(path for _, paths in extensions for path in paths))
+            except CompilerError:
+                pass
+        return load_shared_library(self.source, parts=library_parts(self.source))
 
     @staticmethod
     def _address(function) -> int:
