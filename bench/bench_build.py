@@ -16,7 +16,8 @@ directory):
 * the total a user waits for: ``kronlag.derive(system)`` then
   ``eom.numeric(parameters, backend="c")`` (issue 19's targets: at most 10 s for
   ``closed_chain(40, "relative")``, 20 s for ``closed_chain(100, "absolute")``, on a 2-core
-  machine) and the peak memory of that process (target 600 MB);
+  machine), the CPU time of the Python process and of the compilers in it (what other jobs on a
+  shared machine do not change much) and the peak memory of that process (target 600 MB);
 * the first ``kronlag.simulate`` after it (default method, 0.05 s from an assembled state): what
   it compiles on top (target 1 s);
 * the same work again, split into its phases: *derivation*, *conversion*
@@ -65,13 +66,19 @@ def measure(n: int, angles: str, compare_cse: bool) -> dict:
 
     from kronlag import simulate
 
+    def cpu(who: int) -> float:
+        usage = resource.getrusage(who)
+        return usage.ru_utime + usage.ru_stime
+
     result: dict = {}
-    start = time.perf_counter()
+    start, python, compilers = time.perf_counter(), cpu(resource.RUSAGE_SELF), cpu(resource.RUSAGE_CHILDREN)
     eom = derive(models.closed_chain(n, angles))
     values = {p.name: 1.0 for p in eom.parameters}
     values.update(xg=0.6 * n, yg=0.0)
     model = eom.numeric(values, backend="c")
     result["total"] = time.perf_counter() - start
+    result["python_cpu"] = cpu(resource.RUSAGE_SELF) - python
+    result["compiler_cpu"] = cpu(resource.RUSAGE_CHILDREN) - compilers
     result["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     guess = np.linspace(0.8, -0.8, n) if angles == "absolute" else np.r_[0.8, np.full(n - 1, -1.6 / (n - 1))]
     q0, qd0 = model.assemble(guess)
@@ -149,6 +156,9 @@ def main() -> None:
         print(f"\nclosed_chain({n}, {angles!r}): {r['temporaries']} temporaries, {r['kernel_kb']:.0f} KiB of kernel C "
               f"({r['source_kb']:.0f} KiB with the solver), compiled in {r['parts']} parallel parts")
         print(f"  derive + eom.numeric(backend='c')  {r['total']:7.2f} s{verdict}  (load {os.getloadavg()[0]:.1f})")
+        print(f"  CPU: Python {r['python_cpu']:.2f} s, compilers {r['compiler_cpu']:.2f} s (at least "
+              f"{r['python_cpu'] + r['compiler_cpu'] / (os.cpu_count() or 1):.1f} s on {os.cpu_count()} idle cores; "
+              "wall time on a shared machine says less)")
         print(f"  peak memory                        {r['peak_mb']:7.0f} MB  (target {PEAK_MB_TARGET:.0f} MB: "
               f"{'ok' if r['peak_mb'] <= PEAK_MB_TARGET else 'OVER'})")
         print(f"  first simulate                     {r['first_simulate']:7.2f} s  (target {FIRST_SIMULATE_TARGET_S:.0f} s: "
@@ -162,6 +172,8 @@ def main() -> None:
         case = f"closed_chain({n}, {angles})"
         record.figure(f"{case}: derive + C build (empty cache)", r["total"], unit=" s", target=target, better="lower",
                       detail="fresh process")
+        record.figure(f"{case}: compiler CPU time of the build", r["compiler_cpu"], unit=" s", better="lower",
+                      detail=f"Python {r['python_cpu']:.1f} s of CPU besides")
         record.figure(f"{case}: peak memory of derive + build", r["peak_mb"], unit=" MB", target=PEAK_MB_TARGET,
                       better="lower")
         record.figure(f"{case}: first simulate after the build", r["first_simulate"], unit=" s",

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -45,7 +46,13 @@ if TYPE_CHECKING:
 #: drivers' message too: :func:`kronlag.simulation.drivers.segment_status`).
 NOT_FINITE = "the state is not finite (the integration diverged before: not a singular configuration)"
 
-__all__ = ["NumericModel", "BATCH_MATRICES"]
+__all__ = ["NumericModel", "BATCH_MATRICES", "LIBRARY_EXTENSIONS"]
+
+#: Functions of a model on the C backend returning C to append to its library and the shared libraries
+#: that C needs, or None (:class:`~kronlag.numeric.codegen.CLibrary`'s ``extensions``).  The simulation
+#: layer registers the driver of its default method (:func:`kronlag.simulation.drivers.default_driver_extension`):
+#: compiled with the model, in parallel with the kernels, a first ``simulate`` compiles nothing.
+LIBRARY_EXTENSIONS: list[Callable[[NumericModel], tuple[str, tuple[Path, ...]] | None]] = []
 
 #: The matrices :meth:`NumericModel.evaluate_batch` evaluates (the accessors of the catalogue).
 BATCH_MATRICES = catalogue.ACCESSORS
@@ -166,8 +173,10 @@ class NumericModel(MatrixAccessors):
             friction = ("friction",) if group == "dynamics" and self._source.has_friction else ()
             names = _LIBRARY_GROUPS.get(group, (group,)) + friction
             kernels = [self._source.kernel(name) for name in names]
-            library = codegen.BACKENDS[self.backend](kernels, m=self.m, n_parameters=len(self.parameter_names),
-                                                     rank_rtol=self.rank_rtol)
+            extended = group == "dynamics" and self.backend == "c"
+            library = codegen.BACKENDS[self.backend](
+                kernels, m=self.m, n_parameters=len(self.parameter_names), rank_rtol=self.rank_rtol,
+                **({"extensions": [make(self) for make in LIBRARY_EXTENSIONS]} if extended else {}))
             self._libraries[group] = library
         return library
 

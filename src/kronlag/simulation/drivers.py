@@ -22,7 +22,7 @@ import numpy as np
 
 from ..core.errors import CompilerError, InputError
 from ..numeric import codegen
-from ..numeric.numeric_model import NOT_FINITE
+from ..numeric.numeric_model import LIBRARY_EXTENSIONS, NOT_FINITE
 from ..numeric.tolerances import numerical_rank
 from .controllers import ControlledModel
 from .interface import DriverOptions, GapFunction, c_declarations, doubles
@@ -126,9 +126,14 @@ def driver_source(model: NumericModel, kind: str) -> str:
     """The C source of the driver ``kind`` of :data:`DRIVERS` for ``model``: the model's C source, the
     kernels, :func:`~.interface.c_declarations`, ``monitor.c``, ``progress.c``, ``limits.c``,
     ``controller.c`` and the driver's file (also the core of an exported FMU)."""
+    return model.c_source + _driver_extension(model, kind)
+
+
+def _driver_extension(model: NumericModel, kind: str) -> str:
+    """What :func:`driver_source` appends to the model's C source."""
     spec = DRIVERS[kind]
     # the driver in part 0 (KRONLAG_IN_PART): its library reuses the kernel parts of the model's, compiled already
-    return (model.c_source + model.c_kernels(*spec.kernels) + "#if KRONLAG_IN_PART(0)\n" + c_declarations()
+    return (model.c_kernels(*spec.kernels) + "#if KRONLAG_IN_PART(0)\n" + c_declarations()
             + _c_file("monitor.c") + _c_file("progress.c") + _c_file("limits.c") + _c_file("controller.c")
             + _c_file(spec.file) + "#endif\n")
 
@@ -157,6 +162,23 @@ def driver(model: NumericModel, kind: str) -> ctypes.CDLL:
             names.argtypes, names.restype = [ctypes.c_int], ctypes.c_char_p
         libraries[kind] = library
     return libraries[kind]
+
+
+def default_driver_extension(model: NumericModel) -> tuple[str, tuple[Path, ...]] | None:
+    """The CVODE driver (the default method's, away from singular configurations) to compile with
+    ``model``'s library (:data:`~kronlag.numeric.numeric_model.LIBRARY_EXTENSIONS`): its library is
+    then the model's, and a first ``simulate`` compiles nothing.  None for a model with time-varying
+    parameters (it runs in Python) or without scikit-sundae (the run that needs it says so)."""
+    if model.time_varying:
+        return None
+    try:
+        linked = tuple(sundials_libraries())
+    except (CompilerError, ImportError):
+        return None
+    return _driver_extension(model, "cvode"), linked
+
+
+LIBRARY_EXTENSIONS.append(default_driver_extension)
 
 
 def passage(model: NumericModel, record: np.ndarray) -> SingularPassage:

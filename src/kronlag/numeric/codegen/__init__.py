@@ -20,7 +20,7 @@ The two backends only print the result:
   loading), loaded with :mod:`ctypes`
   and called through the fixed call layer ``kronlag.numeric.codegen._call`` built at install
   time (ctypes when it is missing).  Large kernels are split into functions of
-  :data:`C_CHUNK` statements (compilers are superlinear in the size of a
+  about :data:`C_CHUNK` characters (compilers are superlinear in the size of a
   function) and the source is compiled in parallel parts.
 
 Both implement :class:`KernelLibrary`; :data:`BACKENDS` maps the backend names

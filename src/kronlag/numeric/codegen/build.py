@@ -39,10 +39,15 @@ _OPTIMIZATION = "-O2"
 #: at -O2, 6.7 us so.
 _SOLVER_FLAGS = ("-O3", "-DKRONLAG_WIDE_LOOPS")
 #: Kernel chunks longer than this (characters, outside part 0) compile with :data:`_LARGE_KERNEL_OPTIMIZATION`:
-#: on straight-line generated code GCC's -O2 takes 1.6 times as long as -O1 and buys nothing
-#: (closed_chain(30, "relative"): 13 s against 8 s, the kernel 15.5 us either way).
-C_LARGE_SOURCE = 100_000
-_LARGE_KERNEL_OPTIMIZATION = "-O1"
+#: on straight-line generated code GCC's -O2 (its SLP vectorizer above all) takes twice as long and
+#: buys nothing (closed_chain(12, "relative"), 39 000 characters: 0.46 s against 0.25 s of CPU a part,
+#: forward dynamics 12.7 us against 12.6 us; closed_chain(40, "relative"): O2 9 % slower).
+C_LARGE_SOURCE = 30_000
+#: -O1 without the dead-store eliminations, which find nothing in kernels that store every temporary
+#: once into the workspace ``w`` (closed_chain(40, "relative"): 3.2 s of CPU a part against 3.9 s at
+#: -O1, the forward dynamics as fast; without the points-to analysis too, 2.9 s, but 4-7 % slower
+#: calls: ``restrict`` needs it).
+_LARGE_KERNEL_OPTIMIZATION = ("-O1", "-fno-dse", "-fno-tree-dse")
 #: The name under which the C compiler of the ``ziglang`` package is reported and chosen.
 _ZIG = "zig cc"
 #: Flags of one compiler besides the common ones, by :attr:`CCompiler.name`, when compiling and when
@@ -325,8 +330,8 @@ def _build_plan(source: str, parts: int, libraries: tuple[Path, ...] = ()) -> tu
     if compiler is None:
         raise CompilerError(f"the C backend needs a working C compiler ({failures}); "
                             "use backend='python'")
-    kernel_level = _LARGE_KERNEL_OPTIMIZATION if _kernel_characters(source) > C_LARGE_SOURCE else _OPTIMIZATION
-    levels = [_SOLVER_FLAGS] + [(kernel_level,)] * (parts - 1) if parts > 1 else [(_OPTIMIZATION,)]
+    kernel_level = _LARGE_KERNEL_OPTIMIZATION if _kernel_characters(source) > C_LARGE_SOURCE else (_OPTIMIZATION,)
+    levels = [_SOLVER_FLAGS] + [kernel_level] * (parts - 1) if parts > 1 else [(_OPTIMIZATION,)]
     facts = (compiler.identity, *_CFLAGS, *map(" ".join, levels), source, *(f"link {path}" for path in libraries))
     key = hashlib.sha256("\0".join(facts).encode()).hexdigest()[:32]
     return compiler, levels, key

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import symengine as se
 
+from ...core.errors import CompilerError
 from ...core.kernels import PLACEHOLDER, Kernel, literal
 from ...model.friction import record_size
 from ..tolerances import RANK_RTOL, c_macros
@@ -69,15 +70,31 @@ _C_PREAMBLE = """\
 
 _TEMPORARY = re.compile(r"\bx\d+\b")
 
-#: Statements per generated C function: compilers are superlinear in the size of a function.
-C_CHUNK = 250
+#: Characters of statements per generated C function (one statement may be longer): compilers are
+#: superlinear in the size of a function (GCC's register allocator above all), so a kernel is split into
+#: functions of about this size.  closed_chain(40, "relative"), one 185 000-character function of 250
+#: statements: 6.7 s at -O1, 1.7 s as ten functions of 18 500 characters.
+C_CHUNK = 16_000
+
+
+def _chunks(statements: list[str]) -> list[list[str]]:
+    """``statements`` in runs of at most :data:`C_CHUNK` characters (a longer statement alone)."""
+    chunks: list[list[str]] = [[]]
+    size = 0
+    for statement in statements:
+        if chunks[-1] and size + len(statement) > C_CHUNK:
+            chunks.append([])
+            size = 0
+        chunks[-1].append(statement)
+        size += len(statement)
+    return chunks
 
 
 def c_kernel(kernel: Kernel, first_chunk: int) -> tuple[str, int]:
     """C code of ``void kronlag_<name>(t, q, qd, p, out)`` writing the kernel's flat output.
 
     The temporaries live in a workspace ``w``; the statements are split into
-    functions of :data:`C_CHUNK` statements, chunk ``c`` guarded by
+    functions of about :data:`C_CHUNK` characters, chunk ``c`` guarded by
     ``KRONLAG_IN_PART(first_chunk + c)`` so that parts compile in parallel (``first_chunk`` 0: all
     in part 0, with the hand-written C).  Returns the code and the number of chunks.
     """
@@ -93,15 +110,16 @@ def c_kernel(kernel: Kernel, first_chunk: int) -> tuple[str, int]:
     statements += [f"out[{k}] = {code(expr)};" for k, expr in enumerate(kernel.outputs)]
     arguments = ("double t, const double *restrict q, const double *restrict qd, const double *restrict p, "
                  "double *restrict w, double *restrict out")
-    names = [f"kronlag_{kernel.name}_{c}" for c in range(max(1, -(-len(statements) // C_CHUNK)))]
+    chunks = _chunks(statements)
+    names = [f"kronlag_{kernel.name}_{c}" for c in range(len(chunks))]
     # the declarations in part 0 only, where they are called: a kernel part holds its chunks alone,
     # so that it is the same object in every library that contains it (build.library_parts)
     lines = ["#if KRONLAG_IN_PART(0)", *(f"KRONLAG_INTERNAL void {name}({arguments});" for name in names), "#endif"]
-    for c, name in enumerate(names):
+    for c, (name, chunk) in enumerate(zip(names, chunks)):
         lines += [f"#if KRONLAG_IN_PART({first_chunk + c if first_chunk else 0})",
                   f"KRONLAG_INTERNAL void {name}({arguments})", "{",
                   "    (void)t; (void)q; (void)qd; (void)p; (void)w;"]
-        lines += [f"    {statement}" for statement in statements[c * C_CHUNK:(c + 1) * C_CHUNK]]
+        lines += [f"    {statement}" for statement in chunk]
         lines += ["}", "#endif"]
     lines += ["#if KRONLAG_IN_PART(0)",
               f"void kronlag_{kernel.name}(double t, const double *q, const double *qd, const double *p, double *out)",
@@ -142,10 +160,14 @@ class CLibrary:
     :mod:`ctypes` with per-call buffers (so both are safe from several threads);
     batched calls through :mod:`ctypes` (which releases the GIL) into
     ``numeric/codegen/c/kernel_batch.c``.  With a ``"dynamics"`` kernel the library also holds the
-    solver of the augmented system (``numeric/codegen/c/augmented.c``).
+    solver of the augmented system (``numeric/codegen/c/augmented.c``).  ``extensions``: pairs of C
+    appended to :attr:`source` in the library and the shared libraries it links, or None (a compiled
+    integrator's driver, :data:`~kronlag.numeric.numeric_model.LIBRARY_EXTENSIONS`); :attr:`source` stays
+    the kernels' and the solver's.
     """
 
-    def __init__(self, kernels: Sequence[Kernel], *, m: int, n_parameters: int, rank_rtol: float = RANK_RTOL):
+    def __init__(self, kernels: Sequence[Kernel], *, m: int, n_parameters: int, rank_rtol: float = RANK_RTOL,
+                 extensions: Sequence[tuple[str, tuple[Path, ...]] | None] = ()):
         self.kernels = {kernel.name: kernel for kernel in kernels}
         self.m, self.n_parameters = m, n_parameters
         parts, chunks = [_C_PREAMBLE], 1
@@ -162,8 +184,7 @@ class CLibrary:
                          + friction_header(self.kernels.get("friction"), m))
             parts.append(c_file("linalg.c") + c_file("augmented.c") + c_file("forward_dynamics_batch.c") + "#endif\n")
         self.source = "\n".join(parts)
-        # part 0 (the solver) is small: one process per core for the kernel chunks besides it
-        self.library = load_shared_library(self.source, parts=library_parts(self.source))
+        self.library = self._load([extension for extension in extensions if extension is not None])
         self.functions = {}
         for name in self.kernels:
             function = getattr(self.library, f"kronlag_{name}")
@@ -182,6 +203,20 @@ class CLibrary:
             self._forward_batch.argtypes = [_LONG, _LONG, _POINTER, _LONG, _POINTER, _POINTER, _POINTER, _LONG,
                                             ctypes.c_double, ctypes.c_double, _POINTER, _POINTER, ctypes.c_int]
             self._forward_batch.restype = None
+
+    def _load(self, extensions: list[tuple[str, tuple[Path, ...]]]) -> ctypes.CDLL:
+        """The library of :attr:`source` with the ``extensions`` appended (compiled in part 0, with the
+        solver, while the kernel parts compile), or without them should that fail: the model's own
+        errors are then the ones raised, and the run that needs an extension reports its failure."""
+        # part 0 (the solver) is small: one process per core for the kernel chunks besides it
+        if extensions:
+            extended = self.source + "".join(code for code, _ in extensions)
+            try:
+                return load_shared_library(extended, parts=library_parts(extended),
+                                           libraries=tuple(path for _, paths in extensions for path in paths))
+            except CompilerError:
+                pass
+        return load_shared_library(self.source, parts=library_parts(self.source))
 
     @staticmethod
     def _address(function) -> int:
