@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sp
-from helpers import MASS_ON_A_LINE
+from helpers import MASS_ON_A_LINE, PIN_FRICTION_PENDULUM_VALUES, pin_friction_pendulum
 from scipy.integrate import solve_ivp
 
 import kronlag
@@ -200,3 +200,18 @@ def test_a_continuous_controllers_work_follows_its_inputs_along_the_motion():
     work = np.max(np.abs(trajectory.nonconservative_work))
     assert work > 0.05
     assert np.max(np.abs(trajectory.energy_balance)) <= 1e-6 * work
+
+
+def test_the_balance_between_two_events_closes_when_no_output_is_at_either():
+    """A pendulum with exact pin friction swings through several turning points ('reverse' events); outputs
+    every 7 ms fall on none of them, so each swing's piece has its start and its end added to the outputs
+    for the quadrature of W, in time order: the balance closes as with outputs at every step."""
+    model = kronlag.derive(pin_friction_pendulum(law="exact")).numeric(PIN_FRICTION_PENDULUM_VALUES)
+    angle = 0.6
+    q, qd = model.assemble([0, 0, angle - np.pi / 2], fixed={model.coordinate_names[2]: angle - np.pi / 2})
+    trajectory = kronlag.simulate(model, (0, 3.0), q, qd, rtol=1e-11, atol=1e-12, t_eval=np.arange(0, 3.0, 0.007))
+    assert trajectory.success, trajectory.message
+    turns = [event.t for event in trajectory.events if isinstance(event, StictionEvent) and event.kind == "reverse"]
+    assert len(turns) >= 3 and not np.isin(turns, trajectory.t).any()
+    assert -trajectory.friction_work[-1] > 1e-2  # the friction's work is what the balance must follow
+    np.testing.assert_allclose(trajectory.energy_balance, 0.0, atol=1e-8)

@@ -236,12 +236,13 @@ def _segmented_work(power: Power, model: NumericModel, t: np.ndarray, q, qd, qdd
                 if high in breaks and high > low:  # where the next inputs act: the acceleration of these
                     held = _model_at(with_inputs, low, piece.model, t[high])
                     points[-1] = (*points[-1][:3], held.forward_dynamics(q[high], qd[high], t[high]).qdd)
-            for state, where, row in ((piece.start if lead else None, 0, min(first, len(t) - 1)),
-                                      (piece.end if tail else None, len(points), max(last - 1, 0))):
+            for state, at_end, row in ((piece.start if lead else None, False, min(first, len(t) - 1)),
+                                       (piece.end if tail else None, True, max(last - 1, 0))):
                 if state is not None:
                     time, y = state
                     m = len(y) // 2
                     acting = _model_at(with_inputs, low if breaks is not None else row, piece.model, time)
+                    where = len(points) if at_end else 0  # after the start inserted before: in time order
                     points.insert(where, (time, y[:m], y[m:], acting.forward_dynamics(y[:m], y[m:], time).qdd))
                     rows.insert(where, low if breaks is not None else row)
             if points:
