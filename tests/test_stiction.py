@@ -423,3 +423,20 @@ def test_slider_crank_stopped_by_its_guide_holds_by_the_guide_alone_without_spur
     assert np.max(columns["friction_power"]) <= 1e-9
     lost = trajectory.total_energy[0] - trajectory.total_energy
     np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)
+
+
+def test_a_joint_that_would_hold_a_locked_partner_still_taken_as_sliding_refuses():
+    """The direction check of the joints at rest (``_consistent``) holds a joint that decelerates whichever way
+    it slides; in the geared pair at rest both pins taken as sliding (kinetic friction in fixed directions)
+    decelerate either way below their combined kinetic capacity, and holding one locks the other, whose
+    friction was then not a sliding one: that judgement is unsure, so it refuses instead of keeping the
+    partner sliding at rest."""
+    from kronlag.core.errors import NumericalError
+    from kronlag.simulation.stiction import _consistent, stiction_model
+
+    _, combined = _geared_thresholds()
+    angle = np.arccos(0.5 * MU_K / MU_S * combined / (BAR_MASS * G * BAR_LENGTH / 2))
+    model, q, qd = _geared_bar(angle)
+    with pytest.raises(NumericalError, match="'bar pin', 'wheel pin'|'wheel pin', 'bar pin'"):
+        _consistent(lambda modes: stiction_model(model, modes), [1, 1], 0.0, np.concatenate([q, qd]), 1e-12,
+                    ["bar pin", "wheel pin"])

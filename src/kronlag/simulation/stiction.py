@@ -272,7 +272,7 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
                               f"the holding force {force:.6g} of {names[h]!r} exceeds its own r mu_s N "
                               f"{threshold:.6g} but not surely the group's ({capacity:.6g} with the loads "
                               "without the others' friction)")
-    return tuple(_consistent(variant_of, new, t, y, rest)), found
+    return tuple(_consistent(variant_of, new, t, y, rest, names)), found
 
 
 def _slides_as_whole(variant_of: Callable[[tuple[int, ...]], NumericModel], trial: tuple[int, ...], hold: int,
@@ -367,11 +367,12 @@ def _multipliers(model: NumericModel, t: float, y: np.ndarray) -> np.ndarray:
 
 
 def _consistent(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: list[int], t: float, y: np.ndarray,
-                rest: float) -> list[int]:
+                rest: float, names: list[str]) -> list[int]:
     """``modes`` with every sliding joint at rest made to slide the way its rate then goes: one whose rate
     would grow against its direction slides the other way, and one that would decelerate either way
-    sticks.  (Holding forces of redundant holds -- a linkage stopping with several joints -- are the
-    minimum-norm ones and may point a joint the wrong way: this corrects the direction.)"""
+    sticks (:func:`_check_none_locked_to`).  (Holding forces of redundant holds -- a linkage stopping with
+    several joints -- are the minimum-norm ones and may point a joint the wrong way: this corrects the
+    direction.)"""
     m = len(y) // 2
     modes = list(modes)
     flipped: set[int] = set()
@@ -386,7 +387,26 @@ def _consistent(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: li
         j = wrong[0]
         modes[j] = MODE_HELD if j in flipped else -modes[j]
         flipped.add(j)
+        if modes[j] == MODE_HELD:
+            _check_none_locked_to(variant_of, modes, j, t, y, rest, names)
     return modes
+
+
+def _check_none_locked_to(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: list[int], hold: int,
+                          t: float, y: np.ndarray, rest: float, names: list[str]) -> None:
+    """NumericalError when holding ``hold`` (a joint that decelerates whichever way it slides) would lock a
+    joint still sliding at rest: that joint's friction was taken as sliding when ``hold`` was judged, so the
+    judgement is unsure (the locked groups of :func:`_decide` are decided with the joints' capacities)."""
+    m = len(y) // 2
+    model = variant_of(tuple(modes))
+    rows = [np.asarray(record["J"], dtype=float) for record in friction_records(model, t, y[:m], y[m:])]
+    base = _base_rows(model, tuple(modes), t, y[:m])
+    held = np.vstack([base, *[rows[h][None, :] for h, mode in enumerate(modes) if mode == MODE_HELD]])
+    locked = [i for i, mode in enumerate(modes) if mode in (1, -1) and abs(float(rows[i] @ y[m:])) <= rest
+              and not _dependent(base, rows[i], model.rank_rtol) and _dependent(held, rows[i], model.rank_rtol)]
+    if locked:
+        raise _refuse(names, [hold, *locked], t, y, f"{names[hold]!r} decelerates whichever way it slides and "
+                      "would hold the others, whose friction was taken as sliding when it was judged")
 
 
 def start_modes(model: NumericModel, variant_of: Callable[[tuple[int, ...]], NumericModel], t: float,
