@@ -11,6 +11,7 @@ import shutil
 import subprocess
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -486,3 +487,15 @@ def test_simulate_reports_the_method_intervals_of_redundant_constraints(capsys):
     assert re.search(r"^  compiled from t = 0 to 0\.2 \(\d+ steps\): redundant constraints .*minimum-norm", out, re.M)
     code, out, _ = run(capsys, "simulate", "four_bar", "--t-end", "0.2", "--method", "compiled")
     assert code == 0 and " from t = " not in out
+
+
+def test_simulate_says_when_the_work_is_integrated_over_fewer_outputs_than_steps(capsys):
+    """The balance's W is a quadrature over the outputs: with fewer outputs than steps the summary says
+    that its error is in the energy drift, and that more points tighten it; a run without work says nothing."""
+    friction = Path(__file__).resolve().parents[1] / "examples" / "slider_crank_friction.toml"
+    code, out, err = run(capsys, "simulate", friction, "--t-end", "0.5", "--points", "11")
+    assert code == 0, err
+    assert "W integrated over the 11 output points" in out
+    code, out, err = run(capsys, "simulate", "four_bar", "--t-end", "0.2", "--points", "11")
+    assert code == 0, err
+    assert "W integrated" not in out

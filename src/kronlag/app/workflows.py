@@ -393,6 +393,9 @@ class SimulationSummary:
             f"energy drift: {self.energy_drift:.3g} (relative {self.relative_energy_drift:.3g}; "
             f"E(t) - E(0) - W(t) with the work of non-conservative forces W = {self.work:.6g})",
         ]
+        if self.work and self.points < self.steps:  # W's quadrature error is in the drift, not the motion's
+            lines.append(f"  (W integrated over the {self.points} output points, not the {self.steps} steps: "
+                         "more points (--points, --dt) tighten the balance)")
         if self.limit_events:  # impacts lose energy: not the integration's drift
             lines.append("limit events: " + ", ".join(f"{count} {kind}" for kind, count in self.limit_events)
                          + f" (they changed the energy by {self.event_energy:.6g}, apart from the drift)")
