@@ -121,6 +121,9 @@ REDUNDANCY_PROBE_RESIDUAL = 1e-2
 #: A joint with the exact friction law whose rate is within AT_REST * atol of zero at the start of a
 #: run is at rest: it sticks or slips as its holding force decides (a rate above that slides).
 AT_REST = 1.0
+#: A joint locked to held ones (exact stiction) is tied to the holds whose rate ratio exceeds this times
+#: its largest ratio (the least-squares ratios of the others are rounding).
+TIED_RATIO = 1e-9
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float,

@@ -46,7 +46,7 @@ from ..model.friction import (
 from ..numeric.friction import friction_joints, friction_records, sticking_limit
 from ..core.errors import NumericalError
 from ..numeric.numeric_model import NumericModel
-from ..numeric.tolerances import AT_REST, matrix_rank
+from ..numeric.tolerances import AT_REST, TIED_RATIO, matrix_rank
 from ..symbolic.derivation import derive
 from .controllers import ControlledModel
 from .trajectory import StictionEvent
@@ -172,6 +172,11 @@ def _ratios(base: np.ndarray, holds: list[np.ndarray], row: np.ndarray) -> np.nd
     return solution[len(base):]
 
 
+def _tied(ratios: np.ndarray) -> list[int]:
+    """The holds (indices into ``ratios`` of :func:`_ratios`) a locked joint's rate is tied to."""
+    return [k for k, ratio in enumerate(ratios) if abs(ratio) > TIED_RATIO * np.max(np.abs(ratios))]
+
+
 def _refuse(names: list[str], joints: list[int], t: float, y: np.ndarray, why: str) -> NumericalError:
     m = len(y) // 2
     return NumericalError(
@@ -216,9 +221,8 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
             members = []
             for i in old_locked:
                 ratios = _ratios(base, [rows[h] for h in old_holds], rows[i])
-                ratio = ratios[old_holds.index(j)]
-                if abs(ratio) > 1e-9 * np.max(np.abs(ratios)):
-                    members.append((i, ratio))
+                if old_holds.index(j) in _tied(ratios):
+                    members.append((i, ratios[old_holds.index(j)]))
             if members:  # the hold reached its own capacity; the locked joints' capacity would hold on
                 limits = _holding(current, t, y)
                 capacity = found[j][1] + sum(abs(ratio) * limits[i][1] for i, ratio in members)
@@ -251,7 +255,7 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
             if i not in stopped:
                 continue
             ratios = _ratios(base, [rows[h] for h in holds], rows[i])
-            tied = [holds[k] for k, ratio in enumerate(ratios) if abs(ratio) > 1e-9 * np.max(np.abs(ratios))]
+            tied = [holds[k] for k in _tied(ratios)]
             if len(tied) != 1 or tied[0] not in groups:  # several holds, or one decided before it stopped
                 raise _refuse(names, [i] + tied, t, y, f"the rate of {names[i]!r} is tied to held joints "
                               "that do not stop with it alone")
