@@ -78,7 +78,7 @@ def test_constraint_ranks_group_rows_and_name_the_dependent_ones():
     of Phi_q^T takes last when one depends on the others (as the solver does)."""
     import numpy as np
 
-    from kronlag.app.workflows import ConstraintGroup, constraint_ranks
+    from kronlag.studies.constraint_groups import ConstraintGroup, constraint_ranks
 
     names = ["a.x", "a.y", "b.x", "lone"]
     jacobian = np.array([[1.0, 0, 0], [0, 1.0, 0], [1.0, 0, 0], [0, 0, 2.0]])

@@ -24,10 +24,11 @@ from ..model.modelfile import ModelFile, PrescribedMotion
 from ..model.modelfile.units import si_unit
 from ..model.symbols import t
 from ..model.system import drive_name
-from ..numeric.tolerances import matrix_rank, numerical_rank, rank_magnitudes
+from ..numeric.tolerances import matrix_rank
 from ..simulation.controllers import file_controller
 from ..simulation.simulate import simulate
 from ..simulation.trajectory import LimitEvent, StictionEvent
+from ..studies.constraint_groups import ConstraintGroup, constraint_ranks
 from ..studies.drives import InverseDynamicsRun, Kinematics, inverse_dynamics, kinematic_analysis
 from ..symbolic.derivation import derive
 from ..symbolic.equations import Equations
@@ -38,8 +39,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ModelCheck",
-    "ConstraintGroup",
-    "constraint_ranks",
     "check_model",
     "numeric_model",
     "initial_state",
@@ -154,36 +153,6 @@ _NAIVE = "m - r - s"
 
 #: :meth:`ModelCheck.report` lists every group's rank up to this many groups, beyond it the deficient ones.
 _LISTED_GROUPS = 20
-
-
-@dataclass(frozen=True)
-class ConstraintGroup:
-    """The holonomic rows of one joint or loop (named ``"<group>.<row>"``; a row without a dot is a
-    group of its own) and their rank at the assembled state."""
-
-    name: str
-    rows: tuple[str, ...]
-    rank: int
-
-
-def constraint_ranks(names: Sequence[str], jacobian: np.ndarray,
-                     rank_rtol: float) -> tuple[tuple[ConstraintGroup, ...], tuple[str, ...]]:
-    """The rows ``names`` of ``jacobian`` (``Phi_q``) grouped by the name before their last dot, each
-    group's rank, and the rows dependent on the others (:attr:`ModelCheck.dependent_rows`)."""
-    groups: dict[str, list[int]] = {}
-    for index, name in enumerate(names):
-        groups.setdefault(name.rsplit(".", 1)[0], []).append(index)
-    ranked = tuple(ConstraintGroup(group, tuple(names[i] for i in rows), matrix_rank(jacobian[rows], rank_rtol))
-                   for group, rows in groups.items())
-    count = len(names) - numerical_rank(rank_magnitudes(jacobian)[0], rank_rtol)
-    if not count:
-        return ranked, ()
-    # which rows: those farthest inside the span of the rows before them (|diag R| of the QR of Phi_q^T
-    # in the system's order), as many as the rank policy counts dependent
-    distances = np.zeros(len(names))
-    diagonal = np.abs(np.diag(np.linalg.qr(jacobian.T, mode="r")))
-    distances[:len(diagonal)] = diagonal
-    return ranked, tuple(names[i] for i in sorted(np.argsort(distances, kind="stable")[:count]))
 
 
 def check_model(model: ModelFile, *, equations: Equations | None = None) -> ModelCheck:
