@@ -230,6 +230,11 @@ class ParameterModel:
     def f_Q(self, q: np.ndarray, qd: np.ndarray, t: float = 0.0) -> np.ndarray:
         return np.zeros(len(q))
 
+    def evaluate_batch(self, name: str, q: np.ndarray, qd: np.ndarray | None = None, t=0.0) -> np.ndarray:
+        if name != "f_Q":
+            raise NotImplementedError(f"the stand-in model has no {name}")
+        return np.zeros(np.shape(q))
+
 
 def four_bar_joints(q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Joints B (crank tip) and C (coupler-follower), shape (N, 2), for crank angles ``q1``.

@@ -215,3 +215,16 @@ def test_the_balance_between_two_events_closes_when_no_output_is_at_either():
     assert len(turns) >= 3 and not np.isin(turns, trajectory.t).any()
     assert -trajectory.friction_work[-1] > 1e-2  # the friction's work is what the balance must follow
     np.testing.assert_allclose(trajectory.energy_balance, 0.0, atol=1e-8)
+
+
+def test_the_works_multipliers_at_a_singular_state_raise_as_forward_dynamics_does():
+    """The power of the constraint forces and friction is evaluated for all samples in one batch; a state
+    the batch cannot solve (rank -1, NaN) must raise the error naming it, never pass NaN into W."""
+    from helpers import derived, parameter_values
+
+    from kronlag.simulation.energy import _multipliers
+
+    values = {**parameter_values("double_pendulum"), "m2": 0.0, "I2": 0.0}
+    model = derived("double_pendulum").numeric(values)
+    with pytest.raises(kronlag.SingularConfigurationError, match=r"q = \[0.1, 0.2\]"):
+        _multipliers(model, np.array([0.0, 0.5]), np.array([[0.1, 0.2], [0.3, 0.4]]), np.zeros((2, 2)))

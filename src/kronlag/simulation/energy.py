@@ -63,28 +63,45 @@ class Segment:
     end: tuple[float, np.ndarray] | None = None
 
 
-#: ``power(model, t, q, qd)``: a power at a state.
-Power = Callable[[NumericModel, float, np.ndarray, np.ndarray], float]
+#: ``power(model, t, q, qd)``: a power at N states, ``t`` (N,), ``q`` and ``qd`` (N, m), shape (N,).
+Power = Callable[[NumericModel, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 #: ``with_inputs(row, model, t)``: ``model`` with a controller's inputs at time ``t`` as they were set at (or
 #: held from) output ``row``.
 WithInputs = Callable[[int, NumericModel, float], NumericModel]
 
 
-def _friction_power(model: NumericModel, t: float, q: np.ndarray, qd: np.ndarray) -> float:
+def _multipliers(model: NumericModel, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``lambda`` (N, r) and ``mu`` (N, s) at N states in one call; a state the batch could not solve is
+    solved alone, so that it raises the error :meth:`NumericModel.forward_dynamics` gives (a singular
+    configuration, friction that did not converge) rather than passing NaN on."""
+    solved = model.forward_dynamics_batch(q, qd, t)
+    for row in np.flatnonzero(solved.rank < 0):
+        alone = model.forward_dynamics(q[row], qd[row], float(t[row]))
+        solved.lam[row], solved.mu[row] = alone.lam, alone.mu
+    return solved.lam, solved.mu
+
+
+def _friction_power(model: NumericModel, t: np.ndarray, q: np.ndarray, qd: np.ndarray,
+                    lam: np.ndarray | None = None) -> np.ndarray:
     """``Q_f . qd = -sum_j f_j v_j``, the power of the joints' friction (:mod:`kronlag.model.friction`)
-    with the multipliers of ``model`` (a segment's: its held contacts and joints load the joints)."""
+    with the multipliers ``lam`` of ``model`` (a segment's: its held contacts and joints load the joints)."""
     if not friction_joints(model.equations.system):
-        return 0.0
-    lam = model.forward_dynamics(q, qd, t).lam
-    return float(friction_columns(model, t, q, qd, lam)["friction_power"][0])
+        return np.zeros(len(t))
+    if lam is None:
+        lam = _multipliers(model, t, q, qd)[0]
+    return friction_columns(model, t, q, qd, lam)["friction_power"]
 
 
-def _power(model: NumericModel, t: float, q: np.ndarray, qd: np.ndarray) -> float:
-    forces = model.f_Q(q, qd, t)
+def _power(model: NumericModel, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    forces = model.evaluate_batch("f_Q", q, qd, t)
+    lam = None
     if model.equations.constraints_do_work:
-        result = model.forward_dynamics(q, qd, t)
-        forces = forces - model.Phi_q(q, t).T @ result.lam - model.A(q, t).T @ result.mu
-    return float(qd @ forces) + _friction_power(model, t, q, qd)
+        lam, mu = _multipliers(model, t, q, qd)
+        if model.r:
+            forces = forces - np.einsum("nrm,nr->nm", model.evaluate_batch("Phi_q", q, t=t), lam)
+        if model.s:
+            forces = forces - np.einsum("nsm,ns->nm", model.evaluate_batch("A", q, t=t), mu)
+    return np.einsum("nm,nm->n", qd, forces) + _friction_power(model, t, q, qd, lam)
 
 
 def nonconservative_work(model, t, q, qd, qdd, *, inputs=None, segments: Sequence[Segment] = (),
@@ -246,8 +263,11 @@ def _segmented_work(power: Power, model: NumericModel, t: np.ndarray, q, qd, qdd
                     points.insert(where, (time, y[:m], y[m:], acting.forward_dynamics(y[:m], y[m:], time).qdd))
                     rows.insert(where, low if breaks is not None else row)
             if points:
-                def power_at(k, time, x, v, rows=rows, model=piece.model):
-                    return power(_model_at(with_inputs, rows[k], model, time), time, x, v)
+                def power_at(time, x, v, rows=rows, model=piece.model):
+                    if with_inputs is None:  # one model for the piece: all points in one batch
+                        return power(model, time, x, v)
+                    return np.array([power(with_inputs(rows[k], model, float(time[k])), time[k:k + 1], x[k:k + 1],
+                                           v[k:k + 1])[0] for k in range(len(time))])
 
                 local = _work(power_at, *(np.array(column) for column in zip(*points)))
                 count = high - low + 1 if piece.outputs else 0
@@ -261,31 +281,32 @@ def _model_at(with_inputs: WithInputs | None, row: int, model: NumericModel, tim
     return model if with_inputs is None else with_inputs(row, model, time)
 
 
-def _work(power_of: Callable[..., float], t: np.ndarray, q, qd, qdd) -> np.ndarray:
-    """``integral power_of(k, t, q, qd) dt`` over the samples (:func:`_integrated`), ``k`` the sample."""
+def _work(power_of: Callable[..., np.ndarray], t: np.ndarray, q, qd, qdd) -> np.ndarray:
+    """``integral power_of(t, q, qd) dt`` over the samples (:func:`_integrated`); ``power_of`` gives the
+    power at all of them at once (the ``k``-th row at sample ``k``'s inputs)."""
     if t[-1] == t[0]:  # a single sample, or a segment of no duration (events at one instant)
         return np.zeros(len(t))
-    power = np.array([power_of(k, *state) for k, state in enumerate(zip(t, q, qd))])
+    power = power_of(t, q, qd)
     step = 1e-6 * np.max(np.diff(t))
-
-    def along(k: int, e: float) -> float:
-        return power_of(k, t[k] + e, q[k] + e * qd[k], qd[k] + e * qdd[k])
-
     # a segment's end (or start) is a sample repeated at one time (an event: an impact, a joint that
     # sticks or reverses, where the power jumps or has a kink), as are the motion's ends: there the
     # power and its rate come from that segment's side only, extrapolated from two points along the
-    # motion (the sample itself may lie on the event's other side by the root's tolerance)
-    ends = np.zeros(len(t), dtype=int)
+    # motion (the sample itself may lie on the event's other side by the root's tolerance); elsewhere
+    # the rate is a central difference along the motion (q + e qd, qd + e qdd, t + e)
+    side = np.zeros(len(t), dtype=int)
     repeated = np.flatnonzero(np.diff(t) == 0)
-    ends[repeated], ends[repeated + 1] = -1, 1
-    ends[0], ends[-1] = 1, -1
-    rate = np.empty(len(t))
-    for k, side in enumerate(ends):
-        if side == 0:
-            rate[k] = (along(k, step) - along(k, -step)) / (2 * step)
-            continue
-        near, far = along(k, side * step), along(k, 2 * side * step)
-        power[k], rate[k] = 2 * near - far, (far - near) / (side * step)
+    side[repeated], side[repeated + 1] = -1, 1
+    side[0], side[-1] = 1, -1
+    near_step = np.where(side == 0, step, side * step)
+    far_step = np.where(side == 0, -step, 2 * side * step)
+
+    def along(e: np.ndarray) -> np.ndarray:
+        return power_of(t + e, q + e[:, None] * qd, qd + e[:, None] * qdd)
+
+    near, far = along(near_step), along(far_step)
+    inside = side == 0
+    rate = np.where(inside, (near - far) / (2 * step), (far - near) / np.where(inside, 1, side * step))
+    power = np.where(inside, power, 2 * near - far)
     return _integrated(t, power, rate)
 
 
