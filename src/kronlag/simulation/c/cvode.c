@@ -182,10 +182,10 @@ static int kl_rank_rose(double t, const double *q, const kl_data *data)
     return magnitudes[data->generic_rank] > KRONLAG_LEAVE_RTOL * magnitudes[0];
 }
 
-/* Project x = [q, qd] in place, with terms, B, c (kl_constraints) as workspace; current: they hold
- * the constraints at x's q already (at every step the driver evaluated them there for the watch).
- * Returns 0, or 1 if the projection failed. */
-static int kl_project(double t, double *x, const kl_data *data, double *terms, double *B, double *c, int current)
+/* kl_project with terms, B, c (kl_constraints) as workspace; current: they hold the constraints at
+ * x's q already (with outputs at every step the driver evaluated them there for the watch). */
+static int kl_project_from(double t, double *x, const kl_data *data, double *terms, double *B, double *c,
+                           int current)
 {
     double residual[KL_K + 1];
     double *q = x, *qd = x + KL_M;
@@ -218,11 +218,12 @@ static int kl_project(double t, double *x, const kl_data *data, double *terms, d
     return 0;
 }
 
-/* kl_project with its own workspace. */
-static int kl_project_at(double t, double *x, const kl_data *data)
+/* Project x = [q, qd] in place (kl_project_from with its own workspace).  Returns 0, or 1 if the
+ * projection failed. */
+static int kl_project(double t, double *x, const kl_data *data)
 {
     double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1];
-    return kl_project(t, x, data, terms, B, c, 0);
+    return kl_project_from(t, x, data, terms, B, c, 0);
 }
 
 /* Name of a return value of kronlag_cvode that is reported as KRONLAG_RESULT_SOLVER_FAILED (the
@@ -411,7 +412,7 @@ int kronlag_cvode(kronlag_options *o)
             o->t_out[rows] = t_eval[next];
             memcpy(y_out + rows * KL_N, xi, KL_N * sizeof(double));
             kl_control_record(o, rows);
-            if (kl_project_at(t_eval[next], y_out + rows * KL_N, &data)) {
+            if (kl_project(t_eval[next], y_out + rows * KL_N, &data)) {
                 flag = KRONLAG_RESULT_PROJECTION_FAILED;
                 break;
             }
@@ -423,7 +424,7 @@ int kronlag_cvode(kronlag_options *o)
             o->t_out[rows] = t;
             memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
             kl_control_record(o, rows);
-            if (kl_project(t, y_out + rows * KL_N, &data, terms, B, c, at_t && at_x)) {
+            if (kl_project_from(t, y_out + rows * KL_N, &data, terms, B, c, at_t && at_x)) {
                 flag = KRONLAG_RESULT_PROJECTION_FAILED;
                 break;
             }
@@ -437,7 +438,7 @@ int kronlag_cvode(kronlag_options *o)
         if (ratio < KRONLAG_APPROACH_RTOL || kl_rank_rose(t, x, &data)) { flag = KRONLAG_RESULT_APPROACH; break; }
     }
     memcpy(y_end, x, KL_N * sizeof(double));
-    if ((flag == KRONLAG_RESULT_APPROACH || flag == KRONLAG_RESULT_LIMIT) && kl_project_at(t, y_end, &data))
+    if ((flag == KRONLAG_RESULT_APPROACH || flag == KRONLAG_RESULT_LIMIT) && kl_project(t, y_end, &data))
         flag = KRONLAG_RESULT_PROJECTION_FAILED;
     if (flag < 0 && data.stopped) {
         flag = data.stopped;
