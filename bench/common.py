@@ -64,13 +64,20 @@ def machine_load() -> float:
 
 @dataclass(frozen=True)
 class Timing:
-    """Seconds per call of one candidate, one entry per block (each the best of its block's repeats)."""
+    """Seconds per call of one candidate, one entry per block (each the best of its block's repeats);
+    ``cpu_blocks`` the same in CPU time of the process (``time.process_time``: less stretched by other
+    processes on a loaded machine)."""
 
     blocks: tuple[float, ...]
+    cpu_blocks: tuple[float, ...] = ()
 
     @property
     def median(self) -> float:
         return statistics.median(self.blocks)
+
+    @property
+    def cpu_median(self) -> float:
+        return statistics.median(self.cpu_blocks)
 
     def __str__(self) -> str:
         return f"{self.median * 1e3:.3g} ms (median of {len(self.blocks)} blocks)"
@@ -82,29 +89,34 @@ def interleaved(candidates: Mapping[str, Callable[[], object]], *, blocks: int =
 
     Each is called ``warmup`` times first (compilation, caches, JIT); then, in each of ``blocks``
     blocks, every candidate ``repeats`` times in a row, the candidates' order rotating by one from
-    block to block.  A block's figure for a candidate is its best call (``time.perf_counter``).
+    block to block.  A block's figure for a candidate is its best call (``time.perf_counter``; and
+    the best in ``time.process_time``, :attr:`Timing.cpu_blocks`).
     """
     names = list(candidates)
     for name in names:
         for _ in range(warmup):
             candidates[name]()
     times: dict[str, list[float]] = {name: [] for name in names}
+    cpu_times: dict[str, list[float]] = {name: [] for name in names}
     for block in range(blocks):
         shift = block % len(names)
         for name in names[shift:] + names[:shift]:
-            best = float("inf")
+            best = best_cpu = float("inf")
             for _ in range(repeats):
-                start = time.perf_counter()
+                start, start_cpu = time.perf_counter(), time.process_time()
                 candidates[name]()
                 best = min(best, time.perf_counter() - start)
+                best_cpu = min(best_cpu, time.process_time() - start_cpu)
             times[name].append(best)
-    return {name: Timing(tuple(values)) for name, values in times.items()}
+            cpu_times[name].append(best_cpu)
+    return {name: Timing(tuple(times[name]), tuple(cpu_times[name])) for name in names}
 
 
-def ratio(timings: Mapping[str, Timing], numerator: str, denominator: str) -> float:
+def ratio(timings: Mapping[str, Timing], numerator: str, denominator: str, *, cpu: bool = False) -> float:
     """The median over the blocks of ``numerator``'s time over ``denominator``'s (how many times
-    faster ``denominator`` is)."""
-    pairs = zip(timings[numerator].blocks, timings[denominator].blocks)
+    faster ``denominator`` is); ``cpu``: of their CPU times."""
+    blocks = "cpu_blocks" if cpu else "blocks"
+    pairs = zip(getattr(timings[numerator], blocks), getattr(timings[denominator], blocks))
     return statistics.median(a / b for a, b in pairs)
 
 

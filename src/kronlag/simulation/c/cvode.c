@@ -182,15 +182,17 @@ static int kl_rank_rose(double t, const double *q, const kl_data *data)
     return magnitudes[data->generic_rank] > KRONLAG_LEAVE_RTOL * magnitudes[0];
 }
 
-/* Project x = [q, qd] in place.  Returns 0, or 1 if the projection failed. */
-static int kl_project(double t, double *x, const kl_data *data)
+/* kl_project with terms, B, c (kl_constraints) as workspace; current: they hold the constraints at
+ * x's q already (with outputs at every step the driver evaluated them there for the watch). */
+static int kl_project_from(double t, double *x, const kl_data *data, double *terms, double *B, double *c,
+                           int current)
 {
-    double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1], residual[KL_K + 1];
+    double residual[KL_K + 1];
     double *q = x, *qd = x + KL_M;
     if (KL_R > 0) {
         int converged = 0, stalled = 0;
-        for (int iteration = 0; iteration < KRONLAG_MAX_PROJECTION_ITERATIONS; ++iteration) {
-            kl_constraints(t, q, data->p, terms, B, c);
+        for (int iteration = 0; iteration < KRONLAG_MAX_PROJECTION_ITERATIONS; ++iteration, current = 0) {
+            if (!current) kl_constraints(t, q, data->p, terms, B, c);
             double largest = 0.0;
             for (int i = 0; i < KL_R; ++i) largest = fmax(largest, fabs(terms[KL_PHI + i]));
             if (largest <= data->tol || stalled) { converged = 1; break; }
@@ -202,9 +204,10 @@ static int kl_project(double t, double *x, const kl_data *data)
                 if (fabs(q[i] - before[i]) > KRONLAG_STALL * (1.0 + fabs(q[i]))) stalled = 0;
         }
         if (!converged) return 1;
+        current = 1;  /* from the loop's last pass */
     }
     if (KL_K > 0) {
-        if (KL_R == 0) kl_constraints(t, q, data->p, terms, B, c);  /* else still current from the loop */
+        if (!current) kl_constraints(t, q, data->p, terms, B, c);
         for (int i = 0; i < KL_K; ++i) {
             double sum = c[i];
             for (int j = 0; j < KL_M; ++j) sum += B[i * KL_M + j] * qd[j];
@@ -213,6 +216,14 @@ static int kl_project(double t, double *x, const kl_data *data)
         if (min_norm_correction(B, KL_K, KL_M, residual, qd) == 0) return 1;
     }
     return 0;
+}
+
+/* Project x = [q, qd] in place (kl_project_from with its own workspace).  Returns 0, or 1 if the
+ * projection failed. */
+static int kl_project(double t, double *x, const kl_data *data)
+{
+    double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1];
+    return kl_project_from(t, x, data, terms, B, c, 0);
 }
 
 /* Name of a return value of kronlag_cvode that is reported as KRONLAG_RESULT_SOLVER_FAILED (the
@@ -384,10 +395,15 @@ int kronlag_cvode(kronlag_options *o)
         if (!o->lowest_order || order < o->lowest_order) o->lowest_order = order;
         if (order > o->highest_order) o->highest_order = order;
         double ratio = 1.0;
-        if (KL_R > 0) {  /* the watch needs only Phi_q: its own kernel, far smaller than the dynamics */
+        /* With outputs at every step, the constraints at x serve the watch and the projection of the
+         * output at t (x itself); else the watch needs only Phi_q: its own kernel, far smaller than the
+         * dynamics. */
+        int at_x = n_eval == 0 && KL_K > 0;
+        if (at_x) kl_constraints(t, x, p, terms, B, c);
+        if (KL_R > 0) {
             double zero[KL_M + 1] = {0.0}, Phi_q[KL_R * KL_M + 1];
-            kronlag_Phi_q(t, x, zero, p, Phi_q);
-            ratio = kl_monitor_observe(&monitor, t, x, Phi_q);
+            if (!at_x) kronlag_Phi_q(t, x, zero, p, Phi_q);
+            ratio = kl_monitor_observe(&monitor, t, x, at_x ? terms + KL_PHI_Q : Phi_q);
         }
         /* outputs before t (interpolated); at a sample instant the controller is called and CVODE
          * restarted; then the output at t itself, with the parameters that hold from t on */
@@ -408,7 +424,10 @@ int kronlag_cvode(kronlag_options *o)
             o->t_out[rows] = t;
             memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
             kl_control_record(o, rows);
-            if (kl_project(t, y_out + rows * KL_N, &data)) { flag = KRONLAG_RESULT_PROJECTION_FAILED; break; }
+            if (kl_project_from(t, y_out + rows * KL_N, &data, terms, B, c, at_t && at_x)) {
+                flag = KRONLAG_RESULT_PROJECTION_FAILED;
+                break;
+            }
             ++rows;
             if (n_eval > 0) ++next;
         }
