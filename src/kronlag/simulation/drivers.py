@@ -53,9 +53,11 @@ _MAX_STEP_ROWS = 1_000_000
 _LARGE_BLOCK = 1 << 22
 
 
-def sundials_libraries() -> list[Path]:
+@lru_cache(maxsize=1)
+def sundials_libraries() -> tuple[Path, ...]:
     """The SUNDIALS shared libraries of the scikit-sundae wheel (``scikit_sundae.libs``) that CVODE
-    needs, each after those it depends on (also shipped inside an FMU, :mod:`kronlag.views.fmu`)."""
+    needs, each after those it depends on (also shipped inside an FMU, :mod:`kronlag.views.fmu`); looked
+    up once a process (a sweep's every case needs them)."""
     import sksundae
 
     directory = Path(sksundae.__file__).resolve().parent.parent / "scikit_sundae.libs"
@@ -65,11 +67,12 @@ def sundials_libraries() -> list[Path]:
         if not matches:
             raise CompilerError(f"the compiled method needs lib{name} from scikit-sundae, not found in {directory}")
         found.append(matches[0])
-    return found
+    return tuple(found)
 
 
+@lru_cache(maxsize=None)
 def _c_file(name: str) -> str:
-    """The text of ``simulation/c/<name>``, the C of the compiled integrators."""
+    """The text of ``simulation/c/<name>``, the C of the compiled integrators (read once a process)."""
     return (Path(__file__).with_name("c") / name).read_text()
 
 
