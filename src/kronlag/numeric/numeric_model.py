@@ -67,6 +67,8 @@ _LIBRARY_GROUPS = {"dynamics": ("dynamics", *_EAGER),
                    "accessors": tuple(name for name in catalogue.ACCESSORS if name not in (*_CORIOLIS, *_EAGER)),
                    "coriolis": _CORIOLIS}
 _GROUP_OF = {kernel: group for group, kernels in _LIBRARY_GROUPS.items() for kernel in kernels}
+#: The joints' friction records (:mod:`kronlag.numeric.friction`) are in the dynamics library of a model with friction.
+_GROUP_OF["friction"] = "dynamics"
 #: Former backend names, still accepted with a DeprecationWarning.
 _DEPRECATED_BACKENDS = {"numpy": "python"}
 
