@@ -20,6 +20,7 @@ from kronlag.numeric.reactions import joint_reaction
 
 G = 9.81
 EXAMPLE = "examples/slider_crank_friction.toml"
+FOUR_BAR = "examples/four_bar_friction.toml"
 
 
 def _backends() -> list[str]:
@@ -338,3 +339,53 @@ def test_analyses_that_do_not_include_friction_refuse_it():
         model.inverse_dynamics(np.zeros(3), np.zeros(3), np.zeros(3), actuated=["x_block"])
     with pytest.raises(kronlag.InputError, match="linearize: .* has joint friction"):
         kronlag.linearize(model, np.zeros(3))
+
+
+# -- the solve is a function of the state alone ------------------------------------------------------
+
+def test_friction_solve_does_not_depend_on_the_calls_before_it():
+    """The friction forces are solved from the state at every call (Newton from f = 0, no start carried
+    over from the call before): two models sharing one compiled library (``with_parameters``: other
+    coefficients) evaluated in turn give each the bits it gives alone, and the records read from the
+    library's compiled kernel follow each model's own parameters."""
+    from kronlag.numeric.friction import friction_records
+
+    model_file = kronlag.load_model(FOUR_BAR, apply_drives=False)
+    model = numeric_model(model_file)
+    q0, qd0 = initial_state(model_file, model)
+    states = kronlag.simulate(model, (0, 0.3), q0, qd0, rtol=1e-8, atol=1e-10, t_eval=np.linspace(0, 0.3, 7))
+    other = model.with_parameters(mu_pin=0.4)
+    q, qd = states.q[3], states.qd[3]
+    alone = [model.forward_dynamics(q, qd, 0.15) for _ in range(2)]
+    np.testing.assert_array_equal(alone[0].qdd, alone[1].qdd)
+    for i in range(len(states.t)):
+        other.forward_dynamics(states.q[i], states.qd[i], states.t[i])
+        after = model.forward_dynamics(q, qd, 0.15)
+        np.testing.assert_array_equal(after.qdd, alone[0].qdd)
+        np.testing.assert_array_equal(after.lam, alone[0].lam)
+    kinetic = {record["kinetic"] for record in friction_records(model, 0.15, q, qd)}
+    assert kinetic == {0.1} and {record["kinetic"] for record in friction_records(other, 0.15, q, qd)} == {0.4}
+
+
+def test_four_bar_friction_solve_agrees_with_the_python_reference():
+    """The four-bar's 4 pins read 3 angles: the compiled solve takes the responses to those coordinates'
+    unit forces and combines them (3 right-hand sides, not 4); the Python backend, the reference, takes
+    one per pin.  Both solve the same (qdd, lambda) at moving states, the smooth law and the exact one
+    (each pin sliding)."""
+    from kronlag.simulation.stiction import stiction_model
+
+    if len(_backends()) < 2:
+        pytest.skip("no C compiler")
+    model_file = kronlag.load_model(FOUR_BAR, apply_drives=False)
+    equations = kronlag.derive(model_file.system)
+    models = {backend: equations.numeric(model_file.values, backend=backend) for backend in _backends()}
+    q0, qd0 = initial_state(model_file, models["c"])
+    states = kronlag.simulate(models["c"], (0, 0.3), q0, qd0, rtol=1e-8, atol=1e-10, t_eval=np.linspace(0, 0.3, 4))
+    for modes in [None, (1, -1, 1, -1)]:
+        solved = {}
+        for backend, model in models.items():
+            model = model if modes is None else stiction_model(model, modes)
+            solved[backend] = [model.forward_dynamics(q, qd, t) for t, q, qd in zip(states.t, states.q, states.qd)]
+        for c, python in zip(solved["c"], solved["python"]):
+            np.testing.assert_allclose(c.qdd, python.qdd, rtol=1e-10, atol=1e-10 * np.max(np.abs(python.qdd)))
+            np.testing.assert_allclose(c.lam, python.lam, rtol=1e-10, atol=1e-10 * np.max(np.abs(python.lam)))

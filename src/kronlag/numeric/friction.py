@@ -178,9 +178,9 @@ def solve_with_friction(solve: Callable[[np.ndarray], tuple], flat: np.ndarray, 
 
 
 def friction_records(model, t: float, q: np.ndarray, qd: np.ndarray) -> list[dict]:
-    """The records of ``model``'s joints with friction at a state, split into their fields."""
-    flat = model.evaluate_expressions("friction", lambda: friction_kernel_matrices(model.equations.system), q, qd,
-                                      t=float(t))["friction"][:, 0]
+    """The records of ``model``'s joints with friction at a state, split into their fields (the kernel
+    compiled with the model's dynamics, as its forward dynamics reads them)."""
+    flat = model._evaluate("friction", np.asarray(q, dtype=float), np.asarray(qd, dtype=float), float(t))
     return [_split(record, model.m) for record in flat.reshape(-1, record_size(model.m))]
 
 
@@ -215,10 +215,7 @@ def friction_columns(model, t, q, qd, lam, held: np.ndarray | None = None) -> di
                for name in (f"{joint.name}.friction", f"{joint.name}.normal_load", f"{joint.name}.rate")}
     power = np.zeros(len(t))
     for i, (time, state, speed, multipliers) in enumerate(zip(t, q, qd, lam)):
-        flat = model.evaluate_expressions("friction", lambda: friction_kernel_matrices(system), state, speed,
-                                          t=float(time))["friction"][:, 0]
-        for joint, record in zip(joints, flat.reshape(-1, record_size(model.m))):
-            parts = _split(record, model.m)
+        for joint, parts in zip(joints, friction_records(model, time, state, speed)):
             rate = float(parts["J"] @ speed)
             force, load = friction_force(parts, multipliers, rate)
             j = joints.index(joint)

@@ -57,16 +57,16 @@ LIBRARY_EXTENSIONS: list[Callable[[NumericModel], tuple[str, tuple[Path, ...]] |
 #: The matrices :meth:`NumericModel.evaluate_batch` evaluates (the accessors of the catalogue).
 BATCH_MATRICES = catalogue.ACCESSORS
 #: Kernels compiled with the model, in the library of the ``"dynamics"`` kernel and its solver: the
-#: small accessors the integrators and their drivers read (the constraints, the potential energy;
-#: a first ``simulate`` compiles no kernel again).  The others are compiled into one library on first
-#: use of any of them: the two Coriolis matrices, by far the largest kernels, which the simulation does
-#: not need (one compile for both), and the rest of the accessors (``M``, ``Cqd``).
+#: small accessors the integrators and their drivers read (the constraints, the potential energy, the
+#: joints' friction records; a first ``simulate`` compiles no kernel again).  The others are compiled
+#: into one library on first use of any of them: the two Coriolis matrices, by far the largest kernels,
+#: which the simulation does not need (one compile for both), and the rest of the accessors (``M``, ``Cqd``).
 _CORIOLIS = ("C", "C_christoffel")
 _EAGER = ("Phi", "Phi_q", "Phi_t", "gamma", "A", "b", "gamma_nh", "g", "f_Q", "potential_energy")
 _LIBRARY_GROUPS = {"dynamics": ("dynamics", *_EAGER),
                    "accessors": tuple(name for name in catalogue.ACCESSORS if name not in (*_CORIOLIS, *_EAGER)),
                    "coriolis": _CORIOLIS}
-_GROUP_OF = {kernel: group for group, kernels in _LIBRARY_GROUPS.items() for kernel in kernels}
+_GROUP_OF = {kernel: group for group, names in _LIBRARY_GROUPS.items() for kernel in names} | {"friction": "dynamics"}
 #: Former backend names, still accepted with a DeprecationWarning.
 _DEPRECATED_BACKENDS = {"numpy": "python"}
 

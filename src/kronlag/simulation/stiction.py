@@ -110,9 +110,11 @@ def _holding(variant: NumericModel, t: float, y: np.ndarray) -> list[tuple[float
             for record in records]
 
 
-def _dependent(rows: np.ndarray, row: np.ndarray, rank_rtol: float) -> bool:
-    """Whether ``row`` is a combination of ``rows`` (the one rank policy)."""
-    rank = matrix_rank(rows, rank_rtol) if len(rows) else 0
+def _dependent(rows: np.ndarray, row: np.ndarray, rank_rtol: float, rank: int | None = None) -> bool:
+    """Whether ``row`` is a combination of ``rows`` (the one rank policy); ``rank``: that of ``rows``, when
+    known."""
+    if rank is None:
+        rank = matrix_rank(rows, rank_rtol) if len(rows) else 0
     return matrix_rank(np.vstack([rows, row[None, :]]), rank_rtol) == rank
 
 
@@ -143,15 +145,14 @@ def check_not_stopped_by_contacts(free: NumericModel, touching: NumericModel, t:
                 "between them: give this joint Friction(law='smooth'), or put the limit on another motion")
 
 
-def _rate_changes(model: NumericModel, t: float, y: np.ndarray) -> np.ndarray:
-    """``dv/dt`` of every joint with friction at ``(t, y)`` in the segment model ``model``: the rate one short
-    step along the motion (``v`` is zero where this is asked)."""
+def _rate_changes(model: NumericModel, t: float, y: np.ndarray, now: list[dict]) -> np.ndarray:
+    """``dv/dt`` of every joint with friction at ``(t, y)`` in the segment model ``model`` (``now``: its
+    records there): the rate one short step along the motion (``v`` is zero where this is asked)."""
     m = model.m
     q, qd = y[:m], y[m:]
     qdd = model.forward_dynamics(q, qd, t).qdd
     step = 1e-7 * max(1.0, abs(t))
     ahead = friction_records(model, t + step, q + step * qd, qd + step * qdd)
-    now = friction_records(model, t, q, qd)
     return np.array([(float(a["J"] @ (qd + step * qdd)) - float(b["J"] @ qd)) / step for a, b in zip(ahead, now)])
 
 
@@ -233,10 +234,11 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
                 for i, ratio in members:
                     new[i] = int(np.sign(ratio)) * new[j]
     stopped = [j for j, mode in enumerate(modes) if mode in (1, -1) and (j in triggered or abs(rates[j]) <= rest)]
-    for j in stopped:  # kinematic dead points (the constraints alone zero the rate here): the rate passes zero
-        if _dependent(base, rows[j], rank_rtol):
-            new[j] = -modes[j]
-    stopped = [j for j in stopped if not _dependent(base, rows[j], rank_rtol)]
+    base_rank = matrix_rank(base, rank_rtol) if len(base) else 0
+    dead = [j for j in stopped if _dependent(base, rows[j], rank_rtol, base_rank)]
+    for j in dead:  # kinematic dead points (the constraints alone zero the rate here): the rate passes zero
+        new[j] = -modes[j]
+    stopped = [j for j in stopped if j not in dead]
     if stopped:  # held together, each group by its own hold (module docstring, and above)
         holds = [j for j, mode in enumerate(new) if mode == MODE_HELD]
         locked = [j for j, mode in enumerate(new) if mode == MODE_LOCKED]
@@ -383,7 +385,7 @@ def _consistent(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: li
     for _ in range(2 * len(modes) + 1):
         model = variant_of(tuple(modes))
         records = friction_records(model, t, y[:m], y[m:])
-        changes = _rate_changes(model, t, y)
+        changes = _rate_changes(model, t, y, records)
         wrong = [j for j, (mode, record) in enumerate(zip(modes, records))
                  if mode in (1, -1) and abs(float(record["J"] @ y[m:])) <= rest and mode * changes[j] < 0]
         if not wrong:
