@@ -301,10 +301,11 @@ def python_source(kernel: Kernel, arguments: Sequence[str] = ("t", "q", "qd", "p
 
 #: Kernels with more outputs than this get :func:`linear_cse` instead of ``symengine.cse``, whose
 #: search for common subsets of sums' and products' arguments grows much faster than the expressions:
-#: closed_chain(100, "absolute") (10 306 outputs, mostly M) 22-65 s, about like n^4.5, against 2-3 s;
-#: closed_chain(40, "relative") (1 726 outputs) 1.8 s, the robots of example-robot-data (Talos 1 602)
-#: below, where its code is the faster (it shares parts of products and sums, too).
-LINEAR_CSE_OUTPUTS = 4000
+#: closed_chain(100, "absolute") (10 306 outputs, mostly M) 22-65 s, about like n^4.5, against 3-7 s,
+#: but its forward dynamics about 16 % slower (its code shares no parts of products).  Above every
+#: model with a forward-dynamics target (chains up to n = 80: 6 646 outputs; the robots of
+#: example-robot-data, Talos 1 602), so that their code stays that of ``symengine.cse``.
+LINEAR_CSE_OUTPUTS = 8000
 
 
 def _rebuilt(expr: se.Basic, args: Sequence[se.Basic]) -> se.Basic:
