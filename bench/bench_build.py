@@ -22,9 +22,9 @@ directory):
   it compiles on top (target 1 s);
 * the same work again, split into its phases: *derivation*, *conversion*
   (SymPy -> SymEngine of M, h = f_Q - C qd - g, Phi, Phi_q, the time derivatives
-  gamma, ...), *CSE* (``symengine.cse`` of the forward-dynamics kernel), *C text*
-  (printing the source) and *compilation* (the C compiler on the parts of the
-  source in parallel, a cache emptied again);
+  gamma, ...), *CSE* of the forward-dynamics kernel (``symengine.cse``, or ``linear_cse``
+  above ``LINEAR_CSE_OUTPUTS`` outputs: the method is printed), *C text* (printing the source)
+  and *compilation* (the C compiler on the parts of the source in parallel, a cache emptied again);
 * ``eom.numeric(parameters, backend="python")`` for comparison (up to n = 20);
 * with ``--compare-cse``: ``sympy.cse`` against ``symengine.cse`` on the mass
   matrix alone (``sympy.cse`` of the whole kernel takes minutes).
@@ -106,6 +106,10 @@ def measure(n: int, angles: str, compare_cse: bool) -> dict:
         start = time.perf_counter()
         library = codegen.CLibrary([kernel], m=eom.shape[0], n_parameters=len(eom.parameters))
         phases["compilation"] = time.perf_counter() - start - phases["C text"]
+    from kronlag.core.kernels import LINEAR_CSE_OUTPUTS
+
+    outputs = sum(block.size for block in kernel.blocks)
+    result["cse_method"] = "linear_cse" if outputs > LINEAR_CSE_OUTPUTS else "symengine.cse"
     result.update(phases=phases, temporaries=len(kernel.temporaries), source_kb=len(library.source) / 1024,
                   kernel_kb=len(text) / 1024, parts=codegen.library_parts(library.source))
     if n <= PYTHON_BACKEND_MAX_N:
@@ -153,7 +157,7 @@ def main() -> None:
         r = json.loads(output.strip().splitlines()[-1])
         target = TARGETS_S.get((n, angles))
         verdict = "" if target is None else f"  (target {target:.0f} s: {'ok' if r['total'] <= target else 'OVER'})"
-        print(f"\nclosed_chain({n}, {angles!r}): {r['temporaries']} temporaries, {r['kernel_kb']:.0f} KiB of kernel C "
+        print(f"\nclosed_chain({n}, {angles!r}): {r['cse_method']}, {r['temporaries']} temporaries, {r['kernel_kb']:.0f} KiB of kernel C "
               f"({r['source_kb']:.0f} KiB with the solver), compiled in {r['parts']} parallel parts")
         print(f"  derive + eom.numeric(backend='c')  {r['total']:7.2f} s{verdict}  (load {os.getloadavg()[0]:.1f})")
         print(f"  CPU: Python {r['python_cpu']:.2f} s, compilers {r['compiler_cpu']:.2f} s (at least "

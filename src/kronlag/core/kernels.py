@@ -5,8 +5,8 @@ and writes their entries, row-major and one block after the other, into a flat
 output.  The expressions are prepared once for every printer:
 SymPy -> SymEngine (memoized, so that shared subexpressions are converted once;
 numbers exact where a double holds them exactly, see :class:`ExpressionConverter`),
-common-subexpression elimination with ``symengine.cse``
-(:func:`cse_kernel`), inputs renamed to array entries such as ``q[i]``.
+common-subexpression elimination with ``symengine.cse``, or in linear time for large kernels
+(:func:`cse_kernel`, :func:`linear_cse`), inputs renamed to array entries such as ``q[i]``.
 
 The printers only write the result out: :func:`python_source` (Python, run on
 floats with :mod:`math` or on NumPy arrays for many states at once, or on
@@ -36,6 +36,8 @@ __all__ = [
     "Kernel",
     "ExpressionConverter",
     "cse_kernel",
+    "linear_cse",
+    "LINEAR_CSE_OUTPUTS",
     "literal",
     "python_source",
     "python_functions",
@@ -297,12 +299,99 @@ def python_source(kernel: Kernel, arguments: Sequence[str] = ("t", "q", "qd", "p
     return "\n".join(lines) + "\n"
 
 
+#: Kernels with more outputs than this get :func:`linear_cse` instead of ``symengine.cse``, whose
+#: search for common subsets of sums' and products' arguments grows much faster than the expressions:
+#: closed_chain(100, "absolute") (10 306 outputs, mostly M) 22-65 s, about like n^4.5, against 3-7 s,
+#: but its forward dynamics about 16 % slower (its code shares no parts of products).  Above every
+#: model with a forward-dynamics target (chains up to n = 80: 6 646 outputs; the robots of
+#: example-robot-data, Talos 1 602), so that their code stays that of ``symengine.cse``.
+LINEAR_CSE_OUTPUTS = 8000
+
+
+def _rebuilt(expr: se.Basic, args: Sequence[se.Basic]) -> se.Basic:
+    """``expr`` of the same kind with ``args``."""
+    if isinstance(expr, se.Add):
+        return se.Add(*args)
+    if isinstance(expr, se.Mul):
+        return se.Mul(*args)
+    if isinstance(expr, se.Pow):
+        return se.Pow(*args)
+    if isinstance(expr, se.Piecewise):  # SymEngine flattens the (value, condition) pairs
+        return se.Piecewise(*zip(args[::2], args[1::2]))
+    # SymEngine's relationals and boolean functions (a Piecewise's conditions) have no .func
+    return (getattr(expr, "func", None) or type(expr))(*args)
+
+
+def _operands(node: se.Basic) -> tuple[tuple[se.Basic, ...], bool]:
+    """The operands :func:`linear_cse` sees in ``node``, and whether they are not its own arguments:
+    a product ``c*a*b*...`` with a number ``c`` is ``c`` times the product ``a*b*...``, which is then
+    shared with the same product elsewhere (``(1/2)*m*l*s`` beside ``m*l*s``)."""
+    args = node.args
+    if isinstance(node, se.Mul) and len(args) > 2:
+        numbers = [arg for arg in args if arg.is_Number]
+        if len(numbers) == 1:
+            return (numbers[0], se.Mul(*(arg for arg in args if not arg.is_Number))), True
+    return args, False
+
+
+def linear_cse(exprs: Sequence[se.Basic]) -> tuple[list[tuple[se.Symbol, se.Basic]], list[se.Basic]]:
+    """Common-subexpression elimination in time linear in the distinct subexpressions of ``exprs``.
+
+    Every composite subexpression used more than once (by distinct parents, or as several of
+    ``exprs``) becomes one temporary ``x<k>``, the product of a numeric factor's other factors too
+    (:func:`_operands`); no common subsets of arguments are searched for (``symengine.cse`` does:
+    its code is faster, its time superlinear, see :data:`LINEAR_CSE_OUTPUTS`).  Returns
+    ``(temporaries, outputs)`` as ``symengine.cse``: ``(symbol, expression)`` pairs in evaluation
+    order (each uses only earlier ones) and ``exprs`` in terms of them.
+    """
+    uses: dict[se.Basic, int] = {}
+    operands: dict[se.Basic, tuple[tuple[se.Basic, ...], bool]] = {}
+    stack = list(exprs)
+    while stack:
+        node = stack.pop()
+        if not node.args:
+            continue
+        seen = uses.get(node, 0)
+        uses[node] = seen + 1
+        if not seen:
+            operands[node] = _operands(node)
+            stack.extend(operands[node][0])
+    replaced: dict[se.Basic, se.Basic] = {}
+    temporaries: list[tuple[se.Symbol, se.Basic]] = []
+    for root in exprs:
+        pending = [(root, False)]
+        while pending:  # depth first, each node after its operands
+            node, ready = pending.pop()
+            if not node.args or node in replaced:
+                continue
+            children, factored = operands[node]
+            if not ready:
+                pending.append((node, True))
+                pending.extend((child, False) for child in children if child.args and child not in replaced)
+                continue
+            args = [replaced.get(child, child) for child in children]
+            if factored:
+                value = se.Mul(*args)
+            elif all(new is old for new, old in zip(args, children)):
+                value = node
+            else:
+                value = _rebuilt(node, args)
+            if uses[node] > 1:
+                symbol = se.Symbol(f"x{len(temporaries)}")
+                temporaries.append((symbol, value))
+                value = symbol
+            replaced[node] = value
+    return temporaries, [replaced.get(expr, expr) for expr in exprs]
+
+
 def cse_kernel(name: str, blocks: Sequence[Block], matrices: Sequence[list[list[se.Basic]]],
                constants: Mapping[str, float]) -> Kernel:
     """The :class:`Kernel` ``name`` of the converted ``matrices`` (one per block), with common
-    subexpressions eliminated over all of them (``symengine.cse``)."""
+    subexpressions eliminated over all of them: ``symengine.cse``, or :func:`linear_cse` above
+    :data:`LINEAR_CSE_OUTPUTS` outputs."""
     flat = [entry for rows in matrices for row in rows for entry in row]
-    temporaries, outputs = se.cse(flat) if flat else ([], [])
+    eliminate = linear_cse if len(flat) > LINEAR_CSE_OUTPUTS else se.cse
+    temporaries, outputs = eliminate(flat) if flat else ([], [])
     return Kernel(name, tuple(blocks), tuple(temporaries), tuple(outputs), dict(constants))
 
 
