@@ -22,14 +22,14 @@ static int kronlag_solve_many(const double *terms, const double *qd, double alph
     const double *gamma_nh = terms + KRONLAG_DYNAMICS_GAMMA_NH;
     double X[m * (k + 1)], tau[k + 1], c[k + 1], B[m * m];
     int perm[k + 1];
-    if (k == 0) {  /* no constraints: M qdd = h by the factorization of M itself, at the model's fixed size */
+    if (k == 0) {  /* no constraints: M qdd = h by the Cholesky factor of M itself, at the model's fixed size */
         (void)qd; (void)alpha; (void)beta; (void)max_rank; (void)nu;
         memcpy(B, M, sizeof B);
         *rank = 0;
-        if (ldl_upper_inline(B, m, m)) return 1;
+        if (cholesky_upper_inline(B, m, m)) return 1;
         for (int e = 0; e < count; ++e) {
             memcpy(qdd + e * m, e == 0 ? h : forcing + (e - 1) * m, m * sizeof *qdd);
-            ldl_solve_inline(B, m, m, qdd + e * m);
+            cholesky_solve_inline(B, m, m, qdd + e * m);
         }
         return 0;
     }
@@ -56,10 +56,10 @@ static int kronlag_solve_many(const double *terms, const double *qd, double alph
     for (int i = 0; i < k; ++i)
         for (int j = 0; j < rho; ++j) W[i * k + j] = i >= j ? X[j * k + i] : 0.0;
     house_qr(W, k, rho, k, NULL, wtau);
-    /* Z^T M Z = B22 by LDL^T, in place (fails if singular); B21 and the rows 0..rho-1 are kept. */
+    /* Z^T M Z = B22 by Cholesky, in place (fails if singular); B21 and the rows 0..rho-1 are kept. */
     int n = m - rho;
     double *B22 = B + rho * m + rho;
-    if (ldl_upper(B22, n, m)) return 1;
+    if (cholesky_upper(B22, n, m)) return 1;
     for (int e = 0; e < count; ++e) {
         double y[m], cp[k + 1], qt[m + 1], a[k + 1];
         /* y = Q^T h; constraint part y1 = Q1^T qdd: T y1 = W^T P^T c (least squares when redundant
@@ -84,7 +84,7 @@ static int kronlag_solve_many(const double *terms, const double *qd, double alph
             for (int j = 0; j < rho; ++j) sum -= B[(rho + i) * m + j] * qt[j];
             z[i] = sum;
         }
-        ldl_solve(B22, n, m, z);
+        cholesky_solve(B22, n, m, z);
         /* Multipliers, minimum norm: R1 P^T nu = Q1^T (h - M qdd) = y1 - B[:rho, :] qt,
          * R1 = T^T W^T, so P^T nu = W T^{-T} (Q1^T (h - M qdd)). */
         for (int i = 0; i < rho; ++i) {

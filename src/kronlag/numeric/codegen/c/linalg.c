@@ -91,12 +91,12 @@ KRONLAG_WIDE static void house_reflect_symmetric(const double *a, int m, int lda
 #define KRONLAG_ALWAYS_INLINE inline
 #endif
 
-/* Factorization A = U^T D U (LDL^T without square roots) of the n x n symmetric matrix A (upper triangle
- * read; row-major, leading dimension lda): U, unit upper triangular, over the strict upper triangle and 1/D
- * on the diagonal; right-looking (row updates, vectorizable).  Returns 1, a singular configuration, when
- * a pivot D_p (the square of Cholesky's) is not above KRONLAG_CHOLESKY_RTOL times the largest diagonal
- * entry of A, else 0.  Inlined where n is a constant (the loops unrolled at the model's size). */
-static KRONLAG_ALWAYS_INLINE int ldl_upper_inline(double *A, int n, int lda)
+/* Cholesky factorization A = U^T U of the n x n symmetric matrix A (upper triangle read; row-major,
+ * leading dimension lda), U written over the upper triangle, right-looking (row updates,
+ * vectorizable).  Returns 1, a singular configuration, when a pivot is not above
+ * KRONLAG_CHOLESKY_RTOL times the largest diagonal entry of A, else 0.  Inlined where n is a
+ * constant (the loops unrolled at the model's size); cholesky_upper where it is not. */
+static KRONLAG_ALWAYS_INLINE int cholesky_upper_inline(double *A, int n, int lda)
 {
     double largest = 0.0;
     for (int i = 0; i < n; ++i) if (A[i * lda + i] > largest) largest = A[i * lda + i];
@@ -104,33 +104,37 @@ static KRONLAG_ALWAYS_INLINE int ldl_upper_inline(double *A, int n, int lda)
     for (int p = 0; p < n; ++p) {
         double *row = A + p * lda;
         if (!(row[p] > KRONLAG_CHOLESKY_RTOL * largest)) return 1;
-        double inverse = 1.0 / row[p];
-        row[p] = inverse;
-        for (int c = p + 1; c < n; ++c) { pivot_row[c] = row[c]; row[c] *= inverse; }
+        double pivot = sqrt(row[p]), inverse = 1.0 / pivot;
+        row[p] = pivot;
+        for (int c = p + 1; c < n; ++c) pivot_row[c] = row[c] *= inverse;
         for (int i = p + 1; i < n; ++i) {
-            double factor = row[i], *target = A + i * lda;  /* A[p, i] / D_p */
+            double factor = pivot_row[i], *target = A + i * lda;
             for (int c = i; c < n; ++c) target[c] -= factor * pivot_row[c];
         }
     }
     return 0;
 }
 
-/* x <- (U^T D U)^-1 x with the factor of ldl_upper_inline; inlined where n is a constant. */
-static KRONLAG_ALWAYS_INLINE void ldl_solve_inline(const double *U, int n, int lda, double *x)
+/* x <- (U^T U)^-1 x with the factor of cholesky_upper_inline; inlined where n is a constant. */
+static KRONLAG_ALWAYS_INLINE void cholesky_solve_inline(const double *U, int n, int lda, double *x)
 {
-    for (int i = 0; i < n; ++i)                       /* U^T y = x, by columns of U^T */
+    for (int i = 0; i < n; ++i) {                     /* U^T y = x, by columns of U^T */
+        x[i] /= U[i * lda + i];
         for (int c = i + 1; c < n; ++c) x[c] -= U[i * lda + c] * x[i];
-    for (int i = 0; i < n; ++i) x[i] *= U[i * lda + i];
-    for (int i = n - 1; i >= 0; --i) {                /* U x = D^-1 y */
+    }
+    for (int i = n - 1; i >= 0; --i) {                /* U x = y */
         double sum = x[i];
         for (int c = i + 1; c < n; ++c) sum -= U[i * lda + c] * x[c];
-        x[i] = sum;
+        x[i] = sum / U[i * lda + i];
     }
 }
 
-/* ldl_upper_inline and ldl_solve_inline where n is known at run time only (wide clones). */
-KRONLAG_WIDE static int ldl_upper(double *A, int n, int lda) { return ldl_upper_inline(A, n, lda); }
-KRONLAG_WIDE static void ldl_solve(const double *U, int n, int lda, double *x) { ldl_solve_inline(U, n, lda, x); }
+/* The two above where n is known at run time only (with the wide clones). */
+KRONLAG_WIDE static int cholesky_upper(double *A, int n, int lda) { return cholesky_upper_inline(A, n, lda); }
+KRONLAG_WIDE static void cholesky_solve(const double *U, int n, int lda, double *x)
+{
+    cholesky_solve_inline(U, n, lda, x);
+}
 
 /* LU factorization with partial pivoting of the n x n row-major matrix a, in place.
  * Returns 0, or 1 if a pivot is exactly zero (the matrix is singular). */
