@@ -1,6 +1,6 @@
 """The per-call path of forward dynamics (issue 21 item 6, issue 19 item 1): the C call layer's
-``ForwardDynamics`` builds the result object itself, the solve takes the fixed-size Cholesky of M when the
-model has no constraints; every check that protects the user stays."""
+``ForwardDynamics`` builds the result object itself; every check that protects the user stays (shapes,
+non-finite states, singular M, redundant constraints), on every backend."""
 
 from __future__ import annotations
 

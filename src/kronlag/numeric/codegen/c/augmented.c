@@ -22,17 +22,6 @@ static int kronlag_solve_many(const double *terms, const double *qd, double alph
     const double *gamma_nh = terms + KRONLAG_DYNAMICS_GAMMA_NH;
     double X[m * (k + 1)], tau[k + 1], c[k + 1], B[m * m];
     int perm[k + 1];
-    if (k == 0) {  /* no constraints: M qdd = h by the Cholesky factor of M itself, at the model's fixed size */
-        (void)qd; (void)alpha; (void)beta; (void)max_rank; (void)nu;
-        memcpy(B, M, sizeof B);
-        *rank = 0;
-        if (cholesky_upper_inline(B, m, m)) return 1;
-        for (int e = 0; e < count; ++e) {
-            memcpy(qdd + e * m, e == 0 ? h : forcing + (e - 1) * m, m * sizeof *qdd);
-            cholesky_solve_inline(B, m, m, qdd + e * m);
-        }
-        return 0;
-    }
     /* X = G^T (m x k), c = [gamma - 2 alpha (Phi_q qd + Phi_t) - beta^2 Phi; gamma_nh - alpha (A qd + b)] */
     for (int j = 0; j < k; ++j) {
         const double *row = j < r ? Phi_q + j * m : A + (j - r) * m;

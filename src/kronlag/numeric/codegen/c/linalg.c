@@ -85,18 +85,11 @@ KRONLAG_WIDE static void house_reflect_symmetric(const double *a, int m, int lda
     }
 }
 
-#if defined(__GNUC__)
-#define KRONLAG_ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#define KRONLAG_ALWAYS_INLINE inline
-#endif
-
 /* Cholesky factorization A = U^T U of the n x n symmetric matrix A (upper triangle read; row-major,
  * leading dimension lda), U written over the upper triangle, right-looking (row updates,
  * vectorizable).  Returns 1, a singular configuration, when a pivot is not above
- * KRONLAG_CHOLESKY_RTOL times the largest diagonal entry of A, else 0.  Inlined where n is a
- * constant (the loops unrolled at the model's size); cholesky_upper where it is not. */
-static KRONLAG_ALWAYS_INLINE int cholesky_upper_inline(double *A, int n, int lda)
+ * KRONLAG_CHOLESKY_RTOL times the largest diagonal entry of A, else 0. */
+KRONLAG_WIDE static int cholesky_upper(double *A, int n, int lda)
 {
     double largest = 0.0;
     for (int i = 0; i < n; ++i) if (A[i * lda + i] > largest) largest = A[i * lda + i];
@@ -115,8 +108,8 @@ static KRONLAG_ALWAYS_INLINE int cholesky_upper_inline(double *A, int n, int lda
     return 0;
 }
 
-/* x <- (U^T U)^-1 x with the factor of cholesky_upper_inline; inlined where n is a constant. */
-static KRONLAG_ALWAYS_INLINE void cholesky_solve_inline(const double *U, int n, int lda, double *x)
+/* x <- (U^T U)^-1 x with the factor of cholesky_upper. */
+KRONLAG_WIDE static void cholesky_solve(const double *U, int n, int lda, double *x)
 {
     for (int i = 0; i < n; ++i) {                     /* U^T y = x, by columns of U^T */
         x[i] /= U[i * lda + i];
@@ -127,13 +120,6 @@ static KRONLAG_ALWAYS_INLINE void cholesky_solve_inline(const double *U, int n, 
         for (int c = i + 1; c < n; ++c) sum -= U[i * lda + c] * x[c];
         x[i] = sum / U[i * lda + i];
     }
-}
-
-/* The two above where n is known at run time only (with the wide clones). */
-KRONLAG_WIDE static int cholesky_upper(double *A, int n, int lda) { return cholesky_upper_inline(A, n, lda); }
-KRONLAG_WIDE static void cholesky_solve(const double *U, int n, int lda, double *x)
-{
-    cholesky_solve_inline(U, n, lda, x);
 }
 
 /* LU factorization with partial pivoting of the n x n row-major matrix a, in place.
