@@ -318,12 +318,12 @@ def run_floating(name: str, path: Path, *, quick: bool, backend: str = "auto") -
     q, v = reference.random_state(rng, len(system.coordinates))
     qd, pq, ptau = reference.S(q) @ v, reference.q(q), reference.tau(system, values)
     number = 200 if quick else 20000
-    ours = per_call(lambda: model.forward_dynamics(q, qd), number=number)
-    theirs = per_call(lambda: reference.pin.aba(reference.model, reference.data, pq, v, ptau), number=number)
+    timing = timed_pair(lambda: model.forward_dynamics(q, qd),
+                        lambda: reference.pin.aba(reference.model, reference.data, pq, v, ptau), number=number)
     return {"robot": name, "bodies": len(system.bodies), "coordinates": len(system.coordinates),
             "constraints": len(system.constraints), "mobility": model.mobility(q), "load_s": loaded - start,
             "derive_s": derived - loaded, "build_s": built - derived, "max_rel": max(worst.values()),
-            "worst": max(worst, key=worst.get), "fd_us": ours, "aba_us": theirs}
+            "worst": max(worst, key=worst.get), **timing}
 
 
 #: Cassie's closed-loop SDF (floating pelvis, four ball-joint loops).
@@ -380,17 +380,29 @@ def run_cassie(folder: Path, *, quick: bool) -> dict:
     q = np.array([system.robot.q_reference[x.name] for x in system.coordinates])
     qd, pq, tau = np.zeros(len(q)), reference.q(q), reference.tau(system, values)
     number = 20 if quick else 2000
-    ours = per_call(lambda: model.forward_dynamics(q, qd), number=number)
-    theirs = per_call(lambda: pinocchio_sdf.constrained_accelerations(peer, pq, np.zeros(peer.model.nv), tau),
-                      number=number)
+    timing = timed_pair(lambda: model.forward_dynamics(q, qd),
+                        lambda: pinocchio_sdf.constrained_accelerations(peer, pq, np.zeros(peer.model.nv), tau),
+                        number=number)
     return {"robot": "cassie_v2.sdf", "bodies": len(system.bodies), "coordinates": len(system.coordinates),
             "constraints": len(system.constraints), "mobility": mobility, "load_s": loaded - start,
             "derive_s": derived - loaded, "build_s": built - derived, "max_rel": max(worst.values()),
-            "worst": max(worst, key=worst.get), "fd_us": ours, "aba_us": theirs}
+            "worst": max(worst, key=worst.get), **timing}
 
 
-def per_call(function, *, number: int) -> float:
-    return min(timeit.repeat(function, number=number, repeat=5)) / number * 1e6
+#: Interleaved blocks of each forward-dynamics timing (medians taken).
+BLOCKS = 9
+
+
+def timed_pair(ours, peer, *, number: int) -> dict[str, float]:
+    """``fd_us`` and ``aba_us``, the µs per call of ``ours`` and ``peer`` (medians over :data:`BLOCKS` blocks of
+    ``number`` calls each, interleaved in this process: a loaded machine slows both alike), ``ratio``, the
+    median of the blocks' ratios, and ``load``, the load average when they were taken."""
+    from common import interleaved, machine_load, ratio  # bench/ is on the path when this file runs as a script
+
+    timings = interleaved({"ours": lambda: timeit.timeit(ours, number=number),
+                           "peer": lambda: timeit.timeit(peer, number=number)}, blocks=BLOCKS)
+    return {"fd_us": timings["ours"].median / number * 1e6, "aba_us": timings["peer"].median / number * 1e6,
+            "ratio": ratio(timings, "ours", "peer"), "load": machine_load()}
 
 
 def run(name: str, path: Path, *, quick: bool) -> dict:
@@ -411,13 +423,13 @@ def run(name: str, path: Path, *, quick: bool) -> dict:
     q, qd = rng.uniform(-1, 1, len(system.coordinates)), rng.uniform(-1, 1, len(system.coordinates))
     pq, pv, ptau = reference.q(q), reference.v(qd), reference.v(tau)
     number = 200 if quick else 20000
-    ours = per_call(lambda: model.forward_dynamics(q, qd), number=number)
-    theirs = per_call(lambda: reference.pin.aba(reference.model, reference.data, pq, pv, ptau), number=number)
+    timing = timed_pair(lambda: model.forward_dynamics(q, qd),
+                        lambda: reference.pin.aba(reference.model, reference.data, pq, pv, ptau), number=number)
     m = len(system.coordinates)
     return {"robot": name, "bodies": len(system.bodies), "coordinates": m, "constraints": len(system.constraints),
             "mobility": model.mobility(on_mimics(system, np.zeros(m))),
             "load_s": loaded - start, "derive_s": derived - loaded, "build_s": built - derived,
-            "max_rel": max(worst.values()), "worst": max(worst, key=worst.get), "fd_us": ours, "aba_us": theirs}
+            "max_rel": max(worst.values()), "worst": max(worst, key=worst.get), **timing}
 
 
 FILES = Path(__file__).resolve().parents[1] / "tests" / "robot_files"
@@ -462,12 +474,11 @@ def run_mjcf(name: str, *, quick: bool) -> dict:
             worst = max(worst, float(np.abs(model.M(q) - mass).max() / np.abs(mass).max()),
                         float(np.abs(model.Cqd(q, qd) + model.g(q) - bias).max() / max(1.0, np.abs(bias).max())))
     number = 200 if quick else 20000
-    ours_us = per_call(lambda: model.forward_dynamics(q, qd), number=number)
-    theirs_us = per_call(lambda: mujoco.mj_forward(peer, data), number=number)
+    timing = timed_pair(lambda: model.forward_dynamics(q, qd), lambda: mujoco.mj_forward(peer, data), number=number)
     return {"robot": f"{name}.xml", "bodies": len(system.bodies), "coordinates": m,
             "constraints": len(system.constraints), "mobility": model.mobility(q), "load_s": loaded - start,
             "derive_s": derived - loaded, "build_s": built - derived, "max_rel": worst, "worst": what,
-            "fd_us": ours_us, "aba_us": theirs_us}
+            **timing}
 
 
 def main(argv=None) -> int:
@@ -489,7 +500,7 @@ def main(argv=None) -> int:
         print("example-robot-data is not installed (pip install example-robot-data)")
         return 1
     print(f"{'robot':<16}{'bodies':>7}{'coords':>7}{'constr':>7}{'mob':>5}{'load s':>8}{'derive s':>10}"
-          f"{'build s':>9}{'max rel diff':>14}{'(in)':>8}{'FD us':>9}{'peer us':>8}{'ratio':>8}")
+          f"{'build s':>9}{'max rel diff':>14}{'(in)':>8}{'FD us':>9}{'peer us':>8}{'ratio':>8}{'load':>6}")
     print("peer: Pinocchio (crba, gravity, nonLinearEffects, aba) for URDF; MuJoCo (mj_fullM, qfrc_bias, mj_forward) "
           "for .xml; 'soft' = MuJoCo's soft loop closure against kronlag's exact one")
     failed = False
@@ -508,7 +519,7 @@ def main(argv=None) -> int:
         failed |= row["max_rel"] > 1e-9 and row["worst"] != "soft"
         print(f"{row['robot']:<16}{row['bodies']:>7}{row['coordinates']:>7}{row['constraints']:>7}{row['mobility']:>5}"
               f"{row['load_s']:>8.2f}{row['derive_s']:>10.2f}{row['build_s']:>9.2f}{row['max_rel']:>14.2e}"
-              f"{row['worst']:>8}{row['fd_us']:>9.2f}{row['aba_us']:>8.2f}{row['fd_us'] / row['aba_us']:>8.2f}",
+              f"{row['worst']:>8}{row['fd_us']:>9.2f}{row['aba_us']:>8.2f}{row['ratio']:>8.2f}{row['load']:>6.1f}",
               flush=True)
         if name != "cassie":
             record_row(record, row, quick=arguments.quick)
@@ -526,9 +537,9 @@ def record_row(record, row: dict, *, quick: bool) -> None:
                   detail=f"derive {row['derive_s']:.2f} s, build {row['build_s']:.2f} s")
     mujoco = row["robot"].endswith(".xml")
     record.figure(f"{row['robot']}: forward dynamics / {'MuJoCo mj_forward' if mujoco else 'Pinocchio aba'}",
-                  row["fd_us"] / row["aba_us"], unit="x", target=None if mujoco else TARGET_RATIO, better="lower",
-                  detail=f"{row['fd_us']:.2f} µs vs {row['aba_us']:.2f} µs, best of 5 x {200 if quick else 20000} "
-                  "calls each (not interleaved)")
+                  row["ratio"], unit="x", target=None if mujoco else TARGET_RATIO, better="lower",
+                  detail=f"{row['fd_us']:.2f} µs vs {row['aba_us']:.2f} µs, medians of {BLOCKS} interleaved blocks of "
+                  f"{200 if quick else 20000} calls, load {row['load']:.1f}")
 
 
 if __name__ == "__main__":

@@ -339,23 +339,22 @@ class NumericModel(MatrixAccessors):
         NumericalError
             ``q`` or ``qd`` is not finite (an integration that diverged, not a singular configuration).
         """
-        parameters = self._parameters.vector(t) if self._constants is None else self._constants
-        qdd, lam, mu, rank = self._forward(t, q, qd, parameters, alpha, beta)
-        if rank == -2:
-            raise NumericalError(f"the joints' friction forces did not converge at t = {t!r} (coefficients too large)")
-        if rank < 0:
+        constants = self._constants
+        result = self._forward(t, q, qd, self._parameters.vector(t) if constants is None else constants, alpha, beta)
+        if result.__class__ is int:  # the rank alone: a failure
+            if result == -2:
+                raise NumericalError(f"the joints' friction forces did not converge at t = {t!r} (coefficients too large)")
             if not (np.isfinite(q).all() and np.isfinite(qd).all()):  # no configuration to judge
                 raise NumericalError(f"{NOT_FINITE} at t = {t!r}: q = {np.asarray(q).tolist()}, "
                                      f"qd = {np.asarray(qd).tolist()}")
             raise SingularConfigurationError(q, qd, t)
-        unique = rank == self.r + self.s
-        if not unique and not self._warned_redundant:
+        if not result.unique_multipliers and not self._warned_redundant:
             self._warned_redundant = True
-            warnings.warn(f"{self.equations.system.name}: the constraint Jacobian [Phi_q; A] has rank {rank} "
+            warnings.warn(f"{self.equations.system.name}: the constraint Jacobian [Phi_q; A] has rank {result.rank} "
                           f"< {self.r + self.s} (redundant constraints); the accelerations are unique, the "
                           "multipliers returned are the minimum-norm ones", RedundantConstraintsWarning,
                           stacklevel=2)
-        return ForwardDynamicsResult(qdd, lam, mu, unique, rank)
+        return result
 
     # -- many states at once ------------------------------------------------------------------
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ForwardDynamicsResult", "InverseDynamicsResult", "ForwardDynamicsBatch"]
+__all__ = ["ForwardDynamicsResult", "InverseDynamicsResult", "ForwardDynamicsBatch", "forward_dynamics_outcome"]
 
 
 @dataclass(slots=True, eq=False)
@@ -30,6 +30,15 @@ class ForwardDynamicsResult:
     mu: np.ndarray
     unique_multipliers: bool
     rank: int
+
+
+def forward_dynamics_outcome(qdd, lam, mu, rank: int) -> ForwardDynamicsResult | int:
+    """What a backend's forward dynamics returns: the result, or the rank alone when it marks a failure
+    (< 0).  The C call layer (``codegen/_call.c``, ``ForwardDynamics``) builds the same in C: keep the
+    fields plain slots stored by ``__init__``."""
+    if rank < 0:
+        return int(rank)
+    return ForwardDynamicsResult(qdd, lam, mu, rank == len(lam) + len(mu), rank)
 
 
 @dataclass(slots=True, eq=False)

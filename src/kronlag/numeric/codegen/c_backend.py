@@ -16,6 +16,7 @@ import symengine as se
 from ...core.errors import CompilerError
 from ...core.kernels import PLACEHOLDER, Kernel, literal
 from ...model.friction import record_size
+from ..results import ForwardDynamicsResult, forward_dynamics_outcome
 from ..tolerances import RANK_RTOL, c_macros
 from .build import library_parts, load_shared_library
 from .layouts import dynamics_shape, layout_macros
@@ -143,7 +144,7 @@ def _fast_call_module():
         from . import _call
     except ImportError:
         return None
-    return _call
+    return _call if hasattr(_call, "ForwardDynamics") else None  # a build older than _call.c: ctypes
 
 
 #: ``kronlag.numeric.codegen._call`` when it was built at install time, else None (ctypes is used instead).
@@ -247,21 +248,20 @@ class CLibrary:
                            out.ctypes.data, batch_threads())
         return out
 
-    def forward_dynamics_function(self) -> Callable[..., tuple]:
+    def forward_dynamics_function(self) -> Callable[..., ForwardDynamicsResult | int]:
         if FAST_CALL is not None:
-            return functools.partial(FAST_CALL.forward_dynamics,
-                                     (self._address(self._packed), *self.shape, self.n_parameters))
+            return FAST_CALL.ForwardDynamics(self._address(self._packed), *self.shape, self.n_parameters,
+                                             ForwardDynamicsResult)
         return self._ctypes_forward_dynamics
 
-    def _ctypes_forward_dynamics(self, t: float, q, qd, p: np.ndarray, alpha: float, beta: float) -> tuple:
+    def _ctypes_forward_dynamics(self, t: float, q, qd, p: np.ndarray, alpha: float,
+                                 beta: float) -> ForwardDynamicsResult | int:
         m, r, s = self.shape
         inputs = np.concatenate([(t, alpha, beta), _vector(q, m, "q"), _vector(qd, m, "qd"),
                                  _vector(p, self.n_parameters, "p")])
         out = np.empty(m + r + s + 1)
         rank = self._packed(inputs.ctypes.data, out.ctypes.data)
-        if rank < 0:
-            return None, None, None, rank
-        return out[:m], out[m:m + r], out[m + r:m + r + s], rank
+        return forward_dynamics_outcome(out[:m], out[m:m + r], out[m + r:m + r + s], rank)
 
     def forward_dynamics_batch(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, p: np.ndarray,
                                alpha: float, beta: float) -> tuple[np.ndarray, np.ndarray]:

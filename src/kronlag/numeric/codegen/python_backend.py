@@ -11,6 +11,7 @@ import numpy as np
 from ...core.errors import InputError
 from ...core.kernels import ARRAY_NAMESPACE, SCALAR_NAMESPACE, Kernel, python_functions, python_source
 from ..linalg import solve_augmented
+from ..results import ForwardDynamicsResult, forward_dynamics_outcome
 from ..tolerances import RANK_RTOL
 from ..friction import solve_with_friction
 from .layouts import dynamics_shape, layout, split_terms
@@ -63,8 +64,9 @@ class KernelLibrary(Protocol):
                        p: np.ndarray) -> np.ndarray:
         """(N, size): the flat output of kernel ``name`` at every state."""
 
-    def forward_dynamics_function(self) -> Callable[..., tuple]:
-        """``f(t, q, qd, p, alpha, beta) -> (qdd, lam, mu, rank)``, all None but rank (-1) if singular."""
+    def forward_dynamics_function(self) -> Callable[..., ForwardDynamicsResult | int]:
+        """``f(t, q, qd, p, alpha, beta)`` -> a :class:`ForwardDynamicsResult`, or its rank alone when that
+        marks a failure (-1 singular, -2 the joints' friction did not converge)."""
 
     def forward_dynamics_batch(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, p: np.ndarray,
                                alpha: float, beta: float) -> tuple[np.ndarray, np.ndarray]:
@@ -106,14 +108,15 @@ class PythonLibrary:
             row[...] = value
         return out.T.copy()
 
-    def forward_dynamics_function(self) -> Callable[..., tuple]:
+    def forward_dynamics_function(self) -> Callable[..., ForwardDynamicsResult | int]:
         return self._forward_dynamics
 
-    def _forward_dynamics(self, t: float, q, qd, p: np.ndarray, alpha: float, beta: float) -> tuple:
+    def _forward_dynamics(self, t: float, q, qd, p: np.ndarray, alpha: float,
+                          beta: float) -> ForwardDynamicsResult | int:
         qd = _vector(qd, self.m, "qd")
         kernel = self.kernels["dynamics"]
-        return self._solve(self._evaluate(self.scalar[kernel.name], (kernel.size,), t, q, qd, p), t, q, qd, p,
-                           alpha, beta)
+        flat = self._evaluate(self.scalar[kernel.name], (kernel.size,), t, q, qd, p)
+        return forward_dynamics_outcome(*self._solve(flat, t, q, qd, p, alpha, beta))
 
     def _solve(self, flat: np.ndarray, t: float, q, qd: np.ndarray, p: np.ndarray, alpha: float,
                beta: float) -> tuple:
