@@ -8,8 +8,8 @@ the root link is the ``ground``, ``fixed`` joints merge their child into the par
 and inertias added by the parallel-axis theorem), a ``revolute`` (or ``continuous``) joint turns
 its child about the axis, a ``prismatic`` one slides it.  Each body's rotation is a
 :class:`~kronlag.RotationSequence` of the placements' elementary rotations and the joint axes, so
-that its angular velocity needs no simplification; an angle that is the double nearest to a
-multiple of pi/2 is taken exactly (:func:`exact_angle`), which keeps the expressions small.
+that its angular velocity needs no simplification; an angle within 1e-11 rad of a multiple of pi/2
+is taken as that multiple exactly (:func:`exact_angle`), which keeps the expressions small.
 
 Joints of several coordinates (:data:`JOINT_COORDINATES`), named ``<joint>_<suffix>``:
 ``floating`` (a floating base: ``_x _y _z``, the translation in the joint frame, then the rotation
@@ -78,12 +78,20 @@ def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     return rz @ ry @ rx
 
 
+#: An angle of a file within this many radians of a multiple of pi/2 is that multiple: files write pi
+#: to 12 significant digits (kinova's ``3.14159265359``, 2.1e-13 off; ``1.57079632679``, 4.9e-12 off
+#: pi/2), and a turn of 1e-11 rad moves a point 1 m away by 10 pm, far below the precision of the
+#: file's lengths.  Coarser values (``1.5708``, 3.7e-6 off pi/2) are taken as written, as Pinocchio
+#: and MuJoCo take them.
+ANGLE_SNAP = 1e-11
+
+
 def exact_angle(value: float) -> sp.Expr:
-    """An angle of the file: ``k pi/2`` exactly where ``value`` is the double nearest to it (the file
-    means it; the difference is below double rounding, and exact zeros keep the expressions small),
-    else the number as given."""
+    """An angle of the file: ``k pi/2`` exactly where ``value`` is within :data:`ANGLE_SNAP` (or double
+    rounding) of it (the file means it, and exact zeros keep the expressions small: kinova's kernel has
+    3.5x fewer operations), else the number as given."""
     quarter = round(value / (np.pi / 2))
-    if abs(value - quarter * (np.pi / 2)) <= 4 * np.finfo(float).eps * max(1.0, abs(value)):
+    if abs(value - quarter * (np.pi / 2)) <= max(ANGLE_SNAP, 4 * np.finfo(float).eps * abs(value)):
         return quarter * sp.pi / 2
     return sp.Float(value)
 
