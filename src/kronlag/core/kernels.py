@@ -210,18 +210,9 @@ class ExpressionConverter:
         if not expr.args:
             return expr
         args = [self.native(arg) for arg in expr.args]
-        if isinstance(expr, se.Add):
-            return se.Add(*args)
-        if isinstance(expr, se.Mul):
-            return se.Mul(*args)
-        if isinstance(expr, se.Pow):
-            return se.Pow(*args)
-        if isinstance(expr, se.Piecewise):  # SymEngine flattens the (value, condition) pairs
-            return se.Piecewise(*zip(args[::2], args[1::2]))
         if isinstance(expr, se.FunctionSymbol):
             raise NotImplementedError(f"cannot generate code for the undefined function {expr}")
-        # SymEngine's relationals and boolean functions (a Piecewise's conditions) have no .func
-        return (getattr(expr, "func", None) or type(expr))(*args)
+        return _rebuilt(expr, args)
 
     def native_matrix(self, matrix: se.DenseMatrix, name: str = "matrix") -> list[list[se.Basic]]:
         """The entries of the SymEngine ``matrix`` (called ``name`` in errors) converted by :meth:`native`."""
