@@ -341,7 +341,7 @@ class NumericModel(MatrixAccessors):
         """
         constants = self._constants
         result = self._forward(t, q, qd, self._parameters.vector(t) if constants is None else constants, alpha, beta)
-        if result.__class__ is int:  # the rank alone: a failure
+        if isinstance(result, int):  # the rank alone: a failure
             if result == -2:
                 raise NumericalError(f"the joints' friction forces did not converge at t = {t!r} (coefficients too large)")
             if not (np.isfinite(q).all() and np.isfinite(qd).all()):  # no configuration to judge
