@@ -31,12 +31,14 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
 import symengine as se
 import sympy as sp
 
 from ...core.kernels import Block, Kernel
 from ...model.frames import GROUND
 from ...model.system import System
+from ..tolerances import TREE_AXIS_RTOL
 
 __all__ = ["TreeLink", "Recursion", "recursion_of", "dynamics_algorithm", "recursive_dynamics_kernel"]
 
@@ -46,9 +48,10 @@ RECURSIVE_JOINTS = ("revolute", "continuous", "prismatic")
 
 @dataclass(frozen=True)
 class TreeLink:
-    """A moving body of the tree: its joint, the parent body (``"ground"``: the fixed root), its
-    frame in the parent body's frame (SymPy, expressions of its coordinate), the joint axis in its
-    own frame, its coordinate's index and its inertial (``None``: massless)."""
+    """A moving body of the tree: its name, joint kind, parent body (``"ground"``: the fixed root), its
+    frame in the parent body's frame (SymPy: ``origin``, ``rotation``, expressions of its coordinate),
+    the joint axis in its own frame, its coordinate's index and its inertial (mass, centre of mass in
+    its frame, central inertia tensor; ``None``: massless)."""
 
     name: str
     kind: str
@@ -69,12 +72,12 @@ class Recursion:
 
 def recursion_of(system: System) -> tuple[Recursion | None, str]:
     """The tree the recursive kernels run on, or ``None`` with the reason the System keeps the flat
-    kernel (the second item says which, in words)."""
+    kernel (the second item: ``"recursive"`` or the reason in words)."""
     robot = getattr(system, "robot", None)
     if robot is None:
         return None, "not read from a robot file"
     if not robot.tree_bodies:
-        return None, "not in joint coordinates of a tree"
+        return None, "not in the joint coordinates of a tree"
     moving = [joint for joint in robot.joints if joint.coordinate is not None]
     unsupported = [f"{joint.name} ({joint.kind})" for joint in moving if joint.kind not in RECURSIVE_JOINTS]
     if unsupported:
@@ -96,8 +99,11 @@ def recursion_of(system: System) -> tuple[Recursion | None, str]:
         step = robot.local_frames[joint.child][1]
         tree_body = robot.tree_bodies.get(joint.child)
         inertial = None if tree_body is None else (tree_body.body.mass, tree_body.centre, tree_body.body.inertia)
-        links.append(TreeLink(joint.child, joint.kind, parent, origin + rotation * sp.Matrix(step.origin),
-                              rotation * sp.Matrix(step.rotation), joint.axis, index[joint.coordinate], inertial))
+        link = TreeLink(joint.child, joint.kind, parent, origin + rotation * sp.Matrix(step.origin),
+                        rotation * sp.Matrix(step.rotation), joint.axis, index[joint.coordinate], inertial)
+        if not _moves_as_joint(link, system.coordinates[link.index]):
+            return None, f"the frame of link {link.name!r} does not move as its {joint.kind} joint {joint.name!r}"
+        links.append(link)
     return Recursion(tuple(links)), "recursive"
 
 
@@ -109,6 +115,26 @@ def _in_body_frame(robot, link: str, body: str) -> tuple[sp.Matrix, sp.Matrix]:
         link, step = robot.local_frames[link]
         origin, rotation = sp.Matrix(step.origin) + sp.Matrix(step.rotation) * origin, sp.Matrix(step.rotation) * rotation
     return origin, rotation
+
+
+def _moves_as_joint(link: TreeLink, coordinate: sp.Symbol, angle: float = 0.7) -> bool:
+    """Whether the link's frame turns about its unit axis (revolute) or slides along it (prismatic) as
+    its coordinate goes from 0 to ``angle``: what the recursion assumes of every joint."""
+    def at(matrix: sp.Matrix, value: float) -> np.ndarray:
+        return np.array(matrix.subs(coordinate, value).evalf(), dtype=float)
+
+    axis = np.array(link.axis, dtype=float)
+    rotation0, rotation1 = at(link.rotation, 0.0), at(link.rotation, angle)
+    shift = at(link.origin, angle).ravel() - at(link.origin, 0.0).ravel()
+    if link.kind == "prismatic":
+        turn, slide = np.eye(3), rotation0 @ axis * angle
+    else:
+        cross = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        turn, slide = np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross, np.zeros(3)
+    scale = 1.0 + float(np.max(np.abs(at(link.origin, 0.0))))
+    return bool(abs(np.linalg.norm(axis) - 1) <= TREE_AXIS_RTOL
+                and np.max(np.abs(rotation0.T @ rotation1 - turn)) <= TREE_AXIS_RTOL
+                and np.max(np.abs(shift - slide)) <= TREE_AXIS_RTOL * scale)
 
 
 def dynamics_algorithm(system: System) -> str:
@@ -191,7 +217,7 @@ def _frames(recursion: Recursion, convert: Callable[[sp.Expr], se.Basic], qd: Se
     for link in recursion.links:
         rotation = [[define(convert(link.rotation[i, j])) for j in range(3)] for i in range(3)]
         frames.append(_Frame(rotation, define.vector([convert(x) for x in link.origin]),
-                             [convert(sp.Float(x)) for x in link.axis], link.kind != "prismatic", qd[link.index],
+                             [_number(x) for x in link.axis], link.kind != "prismatic", qd[link.index],
                              position.get(link.parent)))
     return frames
 
@@ -230,7 +256,7 @@ def bias_forces(recursion: Recursion, frames: list[_Frame], gravity: Vector, def
             continue
         mass, centre, inertia = link.inertial
         m = convert(mass)
-        c = [convert(sp.Float(x)) for x in centre]
+        c = [_number(x) for x in centre]
         tensor = [[convert(inertia[i, j]) for j in range(3)] for i in range(3)]
         w, dw = omega[k], alpha[k]
         centre_acceleration = _add(accel[k], _cross(dw, c), _cross(w, define.vector(_cross(w, c))))
@@ -264,7 +290,7 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
             continue
         m_sym, centre, inertia = link.inertial
         m = convert(m_sym)
-        c = [convert(sp.Float(x)) for x in centre]
+        c = [_number(x) for x in centre]
         mass[k], first[k] = m, _scaled(m, c)
         squared = _dot(c, c)
         about_origin[k] = [[convert(inertia[i, j]) + m * ((squared if i == j else zero) - c[i] * c[j])
@@ -315,6 +341,52 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
     return result
 
 
+class _InputConverter:
+    """SymPy -> SymEngine with the kernel's input names (``q[i]``, ``qd[i]``, ``p[i]``, ``t``) and the
+    numbers as doubles, so that constant arithmetic (a mass times a centre, a parallel-axis shift)
+    folds as the recursion builds its terms; :meth:`exact` then gives every double the kernel's exact
+    form (:class:`~kronlag.core.kernels.ExpressionConverter`: a fraction or a named literal)."""
+
+    def __init__(self, source):
+        eq = source.equations
+        inputs = [*zip(eq.coordinates, source.q), *zip(eq.speeds, source.qd),
+                  *((symbol, se.Symbol(f"p[{i}]")) for i, symbol in enumerate(eq.parameters)),
+                  (eq.time, se.Symbol("t"))]
+        self.renames = {se.Symbol(symbol.name): target for symbol, target in inputs}
+        self.source = source
+        self.memo: dict[se.Basic, se.Basic] = {}
+
+    def __call__(self, expr: sp.Expr) -> se.Basic:
+        converted = se.sympify(expr)
+        return converted.xreplace(self.renames) if converted.free_symbols else converted
+
+    def exact(self, expr: se.Basic) -> se.Basic:
+        """``expr`` with its doubles in the kernel's exact form."""
+        result = self.memo.get(expr)
+        if result is None:
+            if isinstance(expr, se.RealDouble):
+                result = self.source.convert(sp.Float(float(expr)))
+            elif not expr.args:
+                result = expr
+            else:
+                args = [self.exact(arg) for arg in expr.args]
+                if isinstance(expr, se.Add):
+                    result = se.Add(*args)
+                elif isinstance(expr, se.Mul):
+                    result = se.Mul(*args)
+                elif isinstance(expr, se.Pow):
+                    result = se.Pow(*args)
+                else:
+                    result = expr.func(*args)
+            self.memo[expr] = result
+        return result
+
+
+def _number(value: float) -> se.Basic:
+    """A number of the file: an integer exactly, else a double."""
+    return se.Integer(int(value)) if float(value).is_integer() else se.RealDouble(float(value))
+
+
 # -- the kernel ------------------------------------------------------------------------------------
 
 
@@ -327,7 +399,8 @@ def recursive_dynamics_kernel(source, blocks: Sequence[Block]) -> Kernel | None:
     if recursion is None:
         return None
     assert [block.name for block in blocks[:2]] == ["M", "h"], "the dynamics kernel starts with M and h"
-    convert, m = source.convert, source.m
+    m = source.m
+    convert = _InputConverter(source)
     define = _Definitions()
     frames = _frames(recursion, convert, source.qd, define)
     zero = se.Integer(0)
@@ -337,19 +410,20 @@ def recursive_dynamics_kernel(source, blocks: Sequence[Block]) -> Kernel | None:
     order = [link.index for link in recursion.links]
     mass = [[zero] * m for _ in range(m)]
     velocity_and_gravity = [zero] * m
-    for a, row in zip(order, by_link):
-        velocity_and_gravity[a] = bias[order.index(a)]
-        for b, entry in zip(order, row):
-            mass[a][b] = entry
+    for a, row, entry in zip(order, by_link, bias):
+        velocity_and_gravity[a] = convert.exact(entry)
+        for b, value in zip(order, row):
+            mass[a][b] = convert.exact(value)
     potential = sp.Add(*(load.potential() for load in system.loads))
-    loads = convert(potential) if potential != 0 else zero
+    loads = source.convert(potential) if potential != 0 else zero
     forces = source.matrix("f_Q")
     h = [[forces[i][0] - velocity_and_gravity[i] - (se.diff(loads, source.q[i]) if loads != zero else zero)]
          for i in range(m)]
     matrices = [mass, h, *(source.matrix(block.name) for block in blocks[2:])]
     outputs = [entry for rows in matrices for row in rows for entry in row]
-    temporaries, outputs = _eliminated(define.pairs, outputs)
-    return Kernel("dynamics", tuple(blocks), temporaries, outputs, dict(convert.constants))
+    definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs]
+    temporaries, outputs = _eliminated(definitions, outputs)
+    return Kernel("dynamics", tuple(blocks), temporaries, outputs, dict(source.convert.constants))
 
 
 def _eliminated(definitions: list[tuple[se.Symbol, se.Basic]], outputs: list[se.Basic]
@@ -383,6 +457,16 @@ def _eliminated(definitions: list[tuple[se.Symbol, se.Basic]], outputs: list[se.
         for used in expr.free_symbols:
             if used in values:
                 visit(used)
-    names = {symbol: se.Symbol(f"x{k}") for k, symbol in enumerate(order)}
-    temporaries = tuple((names[symbol], values[symbol].xreplace(names)) for symbol in order)
+    # a temporary that is a symbol or a number times one is written where it is used
+    kept: list[se.Symbol] = []
+    names: dict[se.Symbol, se.Basic] = {}
+    for symbol in order:
+        value = values[symbol].xreplace(names)
+        if _trivial(value):
+            names[symbol] = value
+        else:
+            values[symbol] = value
+            names[symbol] = se.Symbol(f"x{len(kept)}")
+            kept.append(symbol)
+    temporaries = tuple((names[symbol], values[symbol]) for symbol in kept)
     return temporaries, tuple(expr.xreplace(names) for expr in final)
