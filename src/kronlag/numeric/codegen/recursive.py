@@ -120,8 +120,11 @@ def _in_body_frame(robot, link: str, body: str) -> tuple[sp.Matrix, sp.Matrix]:
 def _moves_as_joint(link: TreeLink, coordinate: sp.Symbol, angle: float = 0.7) -> bool:
     """Whether the link's frame turns about its unit axis (revolute) or slides along it (prismatic) as
     its coordinate goes from 0 to ``angle``: what the recursion assumes of every joint."""
+    variable = se.Symbol(coordinate.name)
+
     def at(matrix: sp.Matrix, value: float) -> np.ndarray:
-        return np.array(matrix.subs(coordinate, value).evalf(), dtype=float)
+        entries = [float(se.sympify(entry).subs({variable: value})) for entry in matrix]
+        return np.array(entries).reshape(matrix.shape)
 
     axis = np.array(link.axis, dtype=float)
     rotation0, rotation1 = at(link.rotation, 0.0), at(link.rotation, angle)
@@ -461,7 +464,7 @@ def _eliminated(definitions: list[tuple[se.Symbol, se.Basic]], outputs: list[se.
     kept: list[se.Symbol] = []
     names: dict[se.Symbol, se.Basic] = {}
     for symbol in order:
-        value = values[symbol].xreplace(names)
+        value = _renamed(values[symbol], names)
         if _trivial(value):
             names[symbol] = value
         else:
@@ -469,4 +472,11 @@ def _eliminated(definitions: list[tuple[se.Symbol, se.Basic]], outputs: list[se.
             names[symbol] = se.Symbol(f"x{len(kept)}")
             kept.append(symbol)
     temporaries = tuple((names[symbol], values[symbol]) for symbol in kept)
-    return temporaries, tuple(expr.xreplace(names) for expr in final)
+    return temporaries, tuple(_renamed(expr, names) for expr in final)
+
+
+def _renamed(expr: se.Basic, names: dict[se.Symbol, se.Basic]) -> se.Basic:
+    """``expr`` with its symbols that ``names`` maps replaced (the map of its own symbols only: SymEngine
+    copies the whole map on every call)."""
+    own = {symbol: names[symbol] for symbol in expr.free_symbols if symbol in names}
+    return expr.xreplace(own) if own else expr
