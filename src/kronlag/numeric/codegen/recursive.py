@@ -37,6 +37,7 @@ import sympy as sp
 
 from ...core.kernels import Block, Kernel
 from ...model.frames import GROUND
+from ...model.symbols import free_symbols
 from ...model.system import System
 from ..tolerances import TREE_AXIS_RTOL
 
@@ -89,8 +90,9 @@ def recursion_of(system: System) -> tuple[Recursion | None, str]:
             robot.tree_bodies.get(body.name) is None or robot.tree_bodies[body.name].body is not body
             for body in system.bodies):
         return None, "its bodies are not those the reader made"
-    if system.gravity is not None and len(system.gravity) != 3:
-        return None, "gravity is not a 3-vector"
+    if system.gravity is not None and (len(system.gravity) != 3 or free_symbols(system.gravity) & {
+            *system.coordinates, *system.speeds}):
+        return None, "gravity is not a constant 3-vector"
     index = {q.name: i for i, q in enumerate(system.coordinates)}
     links = []
     for joint in moving:
@@ -423,9 +425,9 @@ def recursive_dynamics_kernel(source, blocks: Sequence[Block]) -> Kernel | None:
     h = [[forces[i][0] - velocity_and_gravity[i] - (se.diff(loads, source.q[i]) if loads != zero else zero)]
          for i in range(m)]
     matrices = [mass, h, *(source.matrix(block.name) for block in blocks[2:])]
-    outputs = [entry for rows in matrices for row in rows for entry in row]
+    entries = [entry for rows in matrices for row in rows for entry in row]
     definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs]
-    temporaries, outputs = _eliminated(definitions, outputs)
+    temporaries, outputs = _eliminated(definitions, entries)
     return Kernel("dynamics", tuple(blocks), temporaries, outputs, dict(source.convert.constants))
 
 
