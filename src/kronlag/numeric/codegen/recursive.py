@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import symengine as se
@@ -41,7 +42,11 @@ from ...model.symbols import free_symbols
 from ...model.system import System
 from ..tolerances import TREE_AXIS_RTOL
 
-__all__ = ["TreeLink", "Recursion", "recursion_of", "dynamics_algorithm", "recursive_dynamics_kernel"]
+if TYPE_CHECKING:
+    from .source import KernelSource
+
+__all__ = ["TreeLink", "Recursion", "recursion_of", "dynamics_algorithm", "bias_forces", "mass_matrix",
+           "recursive_dynamics_kernel"]
 
 #: The joints the recursion moves along (one coordinate each); the readers merge fixed joints.
 RECURSIVE_JOINTS = ("revolute", "continuous", "prismatic")
@@ -217,6 +222,7 @@ class _Frame:
 
 def _frames(recursion: Recursion, convert: Callable[[sp.Expr], se.Basic], qd: Sequence[se.Basic],
             define: _Definitions) -> list[_Frame]:
+    """Each link's frame in its parent's, its axis, speed and parent's position in the list."""
     position = {link.name: k for k, link in enumerate(recursion.links)}
     frames = []
     for link in recursion.links:
@@ -352,7 +358,7 @@ class _InputConverter:
     folds as the recursion builds its terms; :meth:`exact` then gives every double the kernel's exact
     form (:class:`~kronlag.core.kernels.ExpressionConverter`: a fraction or a named literal)."""
 
-    def __init__(self, source):
+    def __init__(self, source: KernelSource):
         eq = source.equations
         inputs = [*zip(eq.coordinates, source.q), *zip(eq.speeds, source.qd),
                   *((symbol, se.Symbol(f"p[{i}]")) for i, symbol in enumerate(eq.parameters)),
@@ -395,7 +401,7 @@ def _number(value: float) -> se.Basic:
 # -- the kernel ------------------------------------------------------------------------------------
 
 
-def recursive_dynamics_kernel(source, blocks: Sequence[Block]) -> Kernel | None:
+def recursive_dynamics_kernel(source: KernelSource, blocks: Sequence[Block]) -> Kernel | None:
     """The ``"dynamics"`` kernel of ``source`` (a :class:`~kronlag.numeric.codegen.KernelSource`) with
     ``M`` and ``h`` computed recursively, or ``None`` when its System does not qualify
     (:func:`recursion_of`).  ``blocks`` are the kernel's blocks, ``M`` and ``h`` first."""
