@@ -430,7 +430,7 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
         centres[spec.child] = centre
         body = system.add_body(RigidBody(spec.child, mass=sp.Float(inertial.mass), inertia=sp.Matrix(inertial.tensor),
                                          position=centre, rotation=_body_rotation(placement), simplify=False))
-        tree_bodies[spec.child] = TreeBody(body, three(inertial.centre))
+        tree_bodies[spec.child] = TreeBody(body, three(inertial.centre.tolist()))
     for spec in moving:
         if spec.kind in ("floating", "ball"):
             system.add_constraint(euler_parameter_constraint(*coordinates_of[spec.name][-4:]),
