@@ -432,7 +432,23 @@ def run(name: str, path: Path, *, quick: bool) -> dict:
     return {"robot": name, "bodies": len(system.bodies), "coordinates": m, "constraints": len(system.constraints),
             "mobility": model.mobility(on_mimics(system, np.zeros(m))),
             "load_s": loaded - start, "derive_s": derived - loaded, "build_s": built - derived,
-            "max_rel": max(worst.values()), "worst": max(worst, key=worst.get), **timing}
+            "max_rel": max(worst.values()), "worst": max(worst, key=worst.get), **timing,
+            **dynamics_kernel(equations)}
+
+
+def dynamics_kernel(equations: kronlag.Equations) -> dict:
+    """How the ``"dynamics"`` kernel computes M and h (``recursive`` or ``flat``,
+    :func:`kronlag.numeric.codegen.recursive.dynamics_algorithm`) and its size: the operations of its
+    temporaries and outputs after common-subexpression elimination (SymEngine's ``count_ops``)."""
+    import symengine
+
+    from kronlag.numeric.codegen import KernelSource
+    from kronlag.numeric.codegen.recursive import dynamics_algorithm
+
+    kernel = KernelSource(equations).kernel("dynamics")
+    operations = sum(symengine.count_ops(expr) for _, expr in kernel.temporaries) + sum(
+        symengine.count_ops(expr) for expr in kernel.outputs)
+    return {"algorithm": dynamics_algorithm(equations.system).split(":")[0], "operations": operations}
 
 
 FILES = Path(__file__).resolve().parents[1] / "tests" / "robot_files"
@@ -524,6 +540,8 @@ def main(argv=None) -> int:
               f"{row['load_s']:>8.2f}{row['derive_s']:>10.2f}{row['build_s']:>9.2f}{row['max_rel']:>14.2e}"
               f"{row['worst']:>8}{row['fd_us']:>9.2f}{row['aba_us']:>8.2f}{row['ratio']:>8.2f}{row['load']:>6.1f}",
               flush=True)
+        if "operations" in row:
+            print(f"{row['robot']}: {row['algorithm']} dynamics kernel, {row['operations']} operations")
         if name != "cassie":
             record_row(record, row, quick=arguments.quick)
     if failed:
@@ -544,7 +562,9 @@ def record_row(record, row: dict, *, quick: bool) -> None:
                   row["ratio"], unit="x", target=None if mujoco or row["robot"] in FLOATING else TARGET_RATIO,
                   better="lower",
                   detail=f"{row['fd_us']:.2f} µs vs {row['aba_us']:.2f} µs, medians of {BLOCKS} interleaved blocks of "
-                  f"{200 if quick else 20000} calls, load {row['load']:.1f}")
+                  f"{200 if quick else 20000} calls, load {row['load']:.1f}"
+                  + (f"; {row['algorithm']} dynamics kernel of {row['operations']} operations" if "operations" in row
+                     else ""))
 
 
 if __name__ == "__main__":

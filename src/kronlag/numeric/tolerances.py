@@ -198,3 +198,10 @@ def c_macros(rank_rtol: float) -> str:
             f"#define KRONLAG_MAX_PROJECTION_ITERATIONS {MAX_PROJECTION_ITERATIONS}\n"
             f"#define KRONLAG_STALL {STALL!r}\n#define KRONLAG_FRICTION_RTOL {FRICTION_RTOL!r}\n"
             f"#define KRONLAG_FRICTION_MAX_ITERATIONS {FRICTION_MAX_ITERATIONS}\n")
+
+
+#: Recursive dynamics kernels (:mod:`kronlag.numeric.codegen.recursive`): a robot link's frame must move
+#: as its joint says (turn about the unit axis, or slide along it) to this relative accuracy at a test
+#: angle, else the System keeps the flat kernel (a reader's frame that disagreed would be a defect).
+TREE_AXIS_RTOL = 1e-12
+__all__ += ["TREE_AXIS_RTOL"]

@@ -16,7 +16,7 @@ import numpy as np
 from ...core.errors import KronlagWarning
 from ..frames import Frame
 
-__all__ = ["RobotFileWarning", "JointLimits", "RobotJoint", "LoopClosure", "Visual", "RobotDescription",
+__all__ = ["RobotFileWarning", "JointLimits", "RobotJoint", "LoopClosure", "Visual", "TreeBody", "RobotDescription",
            "coordinate_name"]
 
 
@@ -118,6 +118,16 @@ class Visual:
     filename: str | None = None
 
 
+@dataclass(frozen=True)
+class TreeBody:
+    """A moving body as the reader made it in joint coordinates: the System's body (a
+    :class:`~kronlag.RigidBody`) and its centre of mass in its own frame, the frame of the link it
+    is named after (the recursive dynamics kernels, :mod:`kronlag.numeric.codegen.recursive`)."""
+
+    body: Any
+    centre: tuple[float, float, float]
+
+
 @dataclass
 class RobotDescription:
     """The file's data kept with its System (``system.robot``).
@@ -153,6 +163,9 @@ class RobotDescription:
         Each moving joint's value (angle or slide) as an expression of the coordinates: its
         coordinate in joint coordinates; in absolute body coordinates (:mod:`.absolute`) the angle
         or slide between its bodies.
+    tree_bodies : dict of str to TreeBody
+        The moving bodies with mass or inertia, by name, as :func:`~.tree.build_system` made them in
+        joint coordinates (empty in absolute body coordinates).
     """
 
     source: str
@@ -169,6 +182,7 @@ class RobotDescription:
     redundant: list[str] = field(default_factory=list)
     loops: tuple[LoopClosure, ...] = ()
     joint_values: dict[str, Any] = field(default_factory=dict)
+    tree_bodies: dict[str, TreeBody] = field(default_factory=dict)
 
     def joint(self, name: str) -> RobotJoint:
         """The joint called ``name``."""

@@ -40,7 +40,8 @@ from ..rotations import (EULER_PARAMETERS, MAX_ROTATION_FACTORS, RotationSequenc
 from ..system import System
 from ..symbols import free_symbols
 from .absolute import COORDINATE_CHOICES, absolute_system
-from .description import JointLimits, RobotDescription, RobotFileWarning, RobotJoint, Visual, coordinate_name
+from .description import (JointLimits, RobotDescription, RobotFileWarning, RobotJoint, TreeBody, Visual,
+                          coordinate_name)
 from .meshes import with_mesh_bounds
 from .safe_xml import XmlDocument
 
@@ -414,6 +415,7 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
         parts.setdefault(placement.body, []).append(moved(inertials[link], placement.in_body))
 
     centres: dict[str, sp.Matrix] = {}
+    tree_bodies: dict[str, TreeBody] = {}
     for spec in moving:
         inertial = combine(parts[spec.child])
         placement = placements[spec.child]
@@ -426,8 +428,9 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
             continue
         centre = placement.origin + matrix_product(placement.rotation, sp.Matrix(inertial.centre))
         centres[spec.child] = centre
-        system.add_body(RigidBody(spec.child, mass=sp.Float(inertial.mass), inertia=sp.Matrix(inertial.tensor),
-                                  position=centre, rotation=_body_rotation(placement), simplify=False))
+        body = system.add_body(RigidBody(spec.child, mass=sp.Float(inertial.mass), inertia=sp.Matrix(inertial.tensor),
+                                         position=centre, rotation=_body_rotation(placement), simplify=False))
+        tree_bodies[spec.child] = TreeBody(body, three(inertial.centre.tolist()))
     for spec in moving:
         if spec.kind in ("floating", "ball"):
             system.add_constraint(euler_parameter_constraint(*coordinates_of[spec.name][-4:]),
@@ -455,7 +458,7 @@ def build_system(document: XmlDocument, *, name: str, file_format: str, links: d
         local_frames=local_frames,
         values={"g": magnitude, **{symbol.name: 0.0 for symbol in torques.values()}},
         q_reference={q.name: value for spec in moving for q, value in _reference(spec, coordinates_of[spec.name])},
-        skipped=document.skipped_summary(), joint_values=dict(coordinate_of))
+        skipped=document.skipped_summary(), joint_values=dict(coordinate_of), tree_bodies=tree_bodies)
     return absolute_system(document, system) if coordinates == "absolute" else system
 
 
