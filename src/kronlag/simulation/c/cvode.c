@@ -116,11 +116,11 @@ typedef struct {
     int stopped;                       /* the controller's code to end the run with (0: none) */
 } kl_data;
 
-static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
+/* The right-hand side [qd, qdd] of the Baumgarte ODE at (t, x = [q, qd]) into dx (shared with
+ * dop853.c).  Returns 0, or -1 when the controller stops the run or the configuration is singular
+ * (remembered in data, for the message). */
+static int kl_index1_rhs(kl_data *data, double t, const double *x, double *dx)
 {
-    kl_data *data = user_data;
-    const double *x = N_VGetArrayPointer(y);
-    double *dx = N_VGetArrayPointer(ydot);
     double lam[KL_R + 1], mu[KL_S + 1];
     memcpy(dx, x + KL_M, KL_M * sizeof(double));
     int stop = kl_control_evaluate(data->o, t, x, x + KL_M);
@@ -132,6 +132,11 @@ static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
     data->t_singular = t;
     memcpy(data->y_singular, x, sizeof data->y_singular);
     return -1;
+}
+
+static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
+{
+    return kl_index1_rhs(user_data, t, N_VGetArrayPointer(y), N_VGetArrayPointer(ydot));
 }
 
 /* Limits: CVODE's root functions, the watched functions of limits.c at (t, y); the contact forces
@@ -224,6 +229,23 @@ static int kl_project(double t, double *x, const kl_data *data)
 {
     double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1];
     return kl_project_from(t, x, data, terms, B, c, 0);
+}
+
+/* The run's data (the rank of [Phi_q; A] at the start: the cap of the right-hand side) and the
+ * watch of singular configurations from o->t0, o->y0; terms, B and c hold the constraints there
+ * (shared with dop853.c). */
+static void kl_index1_start(kronlag_options *o, const double *p, kl_data *data, kl_monitor *monitor, double *terms,
+                            double *B, double *c)
+{
+    *data = (kl_data){p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}, o, 0};
+    kl_constraints(o->t0, o->y0, p, terms, B, c);
+    if (KL_K > 0) {
+        double magnitudes[KL_K + 1];
+        int perm[KL_K + 1];
+        rank_magnitudes(B, KL_K, KL_M, magnitudes, perm);
+        data->generic_rank = rank_of(magnitudes, KL_K < KL_M ? KL_K : KL_M);
+    }
+    kl_monitor_start(monitor, o->t0, o->y0, terms + KL_PHI_Q, o->events, o->max_events);
 }
 
 /* Name of a return value of kronlag_cvode that is reported as KRONLAG_RESULT_SOLVER_FAILED (the
@@ -322,7 +344,7 @@ int kronlag_cvode(kronlag_options *o)
     memcpy(y_end, o->y0, KL_N * sizeof(double));
     if (major != 7) return KL_VERSION_MISMATCH;
     int n_eval = o->n_eval;
-    kl_data data = {p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}, o, 0};
+    kl_data data;
     double t_sample = kl_control_next_sample(o);  /* INFINITY without a sampled controller */
     kl_cvode_counters counted = {0, 0, 0, 0};
     SUNContext ctx = NULL;
@@ -335,14 +357,7 @@ int kronlag_cvode(kronlag_options *o)
     double t = t0, terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1];
     kl_monitor monitor;
     kl_progress progress = {kl_clock()};
-    kl_constraints(t0, o->y0, p, terms, B, c);
-    if (KL_K > 0) {
-        double magnitudes[KL_K + 1];
-        int perm[KL_K + 1];
-        rank_magnitudes(B, KL_K, KL_M, magnitudes, perm);
-        data.generic_rank = rank_of(magnitudes, KL_K < KL_M ? KL_K : KL_M);
-    }
-    kl_monitor_start(&monitor, t0, o->y0, terms + KL_PHI_Q, o->events, o->max_events);
+    kl_index1_start(o, p, &data, &monitor, terms, B, c);
     if (SUNContext_Create(0, &ctx) || SUNContext_ClearErrHandlers(ctx)) goto done;
     if (!(y = N_VNew_Serial(KL_N, ctx)) || !(dense = N_VNew_Serial(KL_N, ctx)) || !(J = SUNDenseMatrix(KL_N, KL_N, ctx))
         || !(LS = SUNLinSol_Dense(y, J, ctx)) || !(mem = CVodeCreate(CV_ADAMS, ctx))) goto done;
