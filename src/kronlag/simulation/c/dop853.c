@@ -2,8 +2,8 @@
  * ODEs I, Sec. II.10) on the Baumgarte index-1 ODE of cvode.c, the outputs projected onto the
  * constraints as there.
  *
- * Appended after cvode.c, whose right-hand side (kl_index1_rhs), start (kl_index1_start), projection
- * (kl_project, kl_project_from), rank watch (kl_rank_rose) and derived outputs (kl_outputs) it
+ * Appended after cvode.c, whose right-hand side (kl_index1_rhs), start (kl_index1_start), watch
+ * (kl_watch_step, kl_rank_rose), projection (kl_project) and outputs (kl_outputs_at, kl_outputs) it
  * shares, and after the coefficient tables KL8_* that kronlag.simulation.dop853.c_coefficients
  * prints from scipy's DOP853 (kronlag.simulation.solvers.compiled_dop853).
  *
@@ -223,15 +223,9 @@ int kronlag_dop853(kronlag_options *o)
         t = t_new;
         memcpy(s->y, y_new, sizeof s->y);
         memcpy(s->f, s->K[KL8_FSAL], sizeof s->f);
-        double *x = s->y, ratio = 1.0;
-        /* the constraints at x serve the watch and, with outputs at every step, the output's projection */
+        double *x = s->y;
         int at_x = n_eval == 0 && KL_K > 0;
-        if (at_x) kl_constraints(t, x, p, terms, B, c);
-        if (KL_R > 0) {
-            double zero[KL_M + 1] = {0.0}, Phi_q[KL_R * KL_M + 1];
-            if (!at_x) kronlag_Phi_q(t, x, zero, p, Phi_q);
-            ratio = kl_monitor_observe(&monitor, t, x, at_x ? terms + KL_PHI_Q : Phi_q);
-        }
+        double ratio = kl_watch_step(&monitor, t, x, p, terms, B, c, at_x);
         /* outputs before t (dense output); at a sample instant the controller is called and the slope
          * evaluated again; then the output at t itself, with the parameters that hold from t on */
         for (; n_eval > 0 && next < n_eval && t_eval[next] < t; ++next, ++rows) {
@@ -248,18 +242,7 @@ int kronlag_dop853(kronlag_options *o)
             if (kl8_rhs(s, t, x, s->f)) { flag = KRONLAG_RESULT_SINGULAR; break; }
         }
         if (n_eval == 0 && rows == o->max_rows) { flag = KRONLAG_RESULT_OUTPUTS_FULL; break; }
-        for (int at_t = n_eval == 0; at_t || (next < n_eval && t_eval[next] <= t); at_t = 0) {
-            o->t_out[rows] = t;
-            memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
-            kl_control_record(o, rows);
-            if (kl_project_from(t, y_out + rows * KL_N, &data, terms, B, c, at_t && at_x)) {
-                flag = KRONLAG_RESULT_PROJECTION_FAILED;
-                break;
-            }
-            ++rows;
-            if (n_eval > 0) ++next;
-        }
-        if (flag) break;
+        if ((flag = kl_outputs_at(o, &data, t, x, &rows, &next, terms, B, c, at_x))) break;
         int stop = kl_progress_report(o, &progress, t);
         if (stop) { flag = stop; break; }
         if (ratio < KRONLAG_APPROACH_RTOL || kl_rank_rose(t, x, &data)) { flag = KRONLAG_RESULT_APPROACH; break; }
