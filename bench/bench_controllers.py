@@ -80,7 +80,7 @@ def main() -> None:
 
     print("1. Python controller at every evaluation (target: <= 5 us a call over the symbolic law)")
     print(f"   {'method':10s} {'symbolic':>10s} {'Python':>10s} {'calls':>8s} {'nfev':>13s} {'overhead/call':>14s}")
-    for method in ("compiled", "switching", "ali3p"):
+    for method in ("compiled", "dop853", "switching", "ali3p"):
         calls = [0]
 
         def counted(t, q, qd):
@@ -106,7 +106,7 @@ def main() -> None:
           f" ({run.nfev} right-hand sides; {plain.nfev} without it)\n")
 
     print("2. Sampled at 1 kHz for 10 s (target: <= 0.2 s)")
-    for method in ("auto", "switching", "compiled", "ali3p"):
+    for method in ("auto", "switching", "compiled", "dop853", "ali3p"):
         for label, t_eval in (("1001 outputs", outputs), ("every step", None)):
             sampled = kronlag.Sampled(feedback, period=1e-3)
             wall, run = best(lambda: kronlag.simulate(model, span, q0, qd0, method=method, t_eval=t_eval,

@@ -175,7 +175,7 @@ def test_sampled_runs_of_the_compiled_and_python_methods_agree():
     times = np.linspace(0, 2, 81)
     runs = {method: kronlag.simulate(model, (0, 2), q0, qd0, method=method, t_eval=times, rtol=1e-10, atol=1e-12,
                                      controller=kronlag.Sampled(feedback(GAINS), period=0.01))
-            for method in ("compiled", "ali3p", "projection", "baumgarte")}
+            for method in ("compiled", "dop853", "ali3p", "projection", "baumgarte")}
     for method, run in runs.items():
         assert np.max(np.abs(run.q - runs["projection"].q)) < 1e-7, method
         assert np.max(np.abs(run.inputs["u"] - runs["projection"].inputs["u"])) < 1e-5, method

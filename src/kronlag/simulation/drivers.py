@@ -3,7 +3,8 @@ model, called through ctypes with one :class:`~.interface.DriverOptions`; their 
 codes turned into segments of a solution.
 
 A compiled integrator is a C file in ``simulation/c/`` defining ``int kronlag_<name>(kronlag_options *)``
-and an entry in :data:`DRIVERS`; :func:`run` calls it."""
+and an entry in :data:`DRIVERS`; :func:`run` calls it.  CVODE's and DOP853's share the Baumgarte
+ODE, the projection and the outputs of ``cvode.c`` and one library."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import ctypes
 import math
 import mmap
 import weakref
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import accumulate
@@ -25,6 +26,7 @@ from ..numeric import codegen
 from ..numeric.numeric_model import LIBRARY_EXTENSIONS, NOT_FINITE
 from ..numeric.tolerances import numerical_rank
 from .controllers import ControlledModel
+from .dop853 import c_coefficients
 from .interface import DriverOptions, GapFunction, c_declarations, doubles
 from .problem import MultibodyProblem, Solution, Solver, SolverOptions, derived_shapes
 from .stepping import SUCCESS, approach_text, stopped_text
@@ -92,8 +94,8 @@ class Driver:
 
     Attributes
     ----------
-    file : str
-        Its C file in ``simulation/c/``, defining ``int <entry>(kronlag_options *options)``.
+    files : tuple of str
+        Its C files in ``simulation/c/``, the last defining ``int <entry>(kronlag_options *options)``.
     entry : str
     kernels : tuple of str
         The model's kernels it calls besides the dynamics (appended to ``model.c_source``).
@@ -103,21 +105,28 @@ class Driver:
         It calls SUNDIALS (linked with the libraries of scikit-sundae, :func:`sundials_libraries`).
     flag_names : str or None
         A C function ``const char *(int)`` naming its return codes that are no :class:`Result`'s.
+    tables : callable or None
+        Returns C text its files read, put before them (DOP853's coefficients).
     """
 
-    file: str
+    files: tuple[str, ...]
     entry: str
     kernels: tuple[str, ...]
     label: str
     sundials: bool = False
     flag_names: str | None = None
+    tables: Callable[[], str] | None = None
 
+
+#: The integrators of the Baumgarte ODE: one library (the default method's, built with the model).
+_INDEX1 = dict(files=("cvode.c", "dop853.c"), kernels=("potential_energy", "Phi_q"), sundials=True,
+               tables=c_coefficients)
 
 #: The compiled integrators by name.
 DRIVERS = {
-    "cvode": Driver("cvode.c", "kronlag_cvode", ("potential_energy", "Phi_q"), "CVODE", sundials=True,
-                    flag_names="kronlag_cvode_flag_name"),
-    "index3": Driver("index3.c", "kronlag_index3", ("tangent", "potential_energy"), "ALI3-P"),
+    "cvode": Driver(entry="kronlag_cvode", label="CVODE", flag_names="kronlag_cvode_flag_name", **_INDEX1),
+    "dop853": Driver(entry="kronlag_dop853", label="DOP853", **_INDEX1),
+    "index3": Driver(("index3.c",), "kronlag_index3", ("tangent", "potential_energy"), "ALI3-P"),
 }
 
 
@@ -138,7 +147,7 @@ def _driver_extension(model: NumericModel, kind: str) -> str:
     # the driver in part 0 (KRONLAG_IN_PART): its library reuses the kernel parts of the model's, compiled already
     return (model.c_kernels(*spec.kernels) + "#if KRONLAG_IN_PART(0)\n" + c_declarations()
             + _c_file("monitor.c") + _c_file("progress.c") + _c_file("limits.c") + _c_file("controller.c")
-            + _c_file(spec.file) + "#endif\n")
+            + (spec.tables() if spec.tables else "") + "".join(_c_file(name) for name in spec.files) + "#endif\n")
 
 
 def has_driver(model: NumericModel) -> bool:

@@ -126,8 +126,8 @@ def solve_with_limits(solver: Solver, problem: MultibodyProblem, derived_of: Cal
     if has_stiction(model.equations.system) and solver.name not in ("compiled", "projection", "baumgarte"):
         raise InputError(f"method={solver.name!r} does not support exact stiction (friction law 'exact'); use "
                          "'compiled' (the default with friction), 'projection' or 'baumgarte'")
-    if solver.name == "ggl":
-        raise InputError("method='ggl' does not watch limits; use 'switching' (the default), 'compiled', "
+    if solver.name in ("ggl", "dop853"):
+        raise InputError(f"method={solver.name!r} does not watch limits; use 'switching' (the default), 'compiled', "
                          "'ali3p', 'baumgarte' or 'projection'")
     check_start(model, problem.q0, problem.t0, options.atol)
     run = _LimitRun(solver, problem, derived_of)

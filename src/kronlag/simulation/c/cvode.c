@@ -116,11 +116,11 @@ typedef struct {
     int stopped;                       /* the controller's code to end the run with (0: none) */
 } kl_data;
 
-static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
+/* The right-hand side [qd, qdd] of the Baumgarte ODE at (t, x = [q, qd]) into dx (shared with
+ * dop853.c).  Returns 0, or -1 when the controller stops the run or the configuration is singular
+ * (remembered in data, for the message). */
+static int kl_index1_rhs(kl_data *data, double t, const double *x, double *dx)
 {
-    kl_data *data = user_data;
-    const double *x = N_VGetArrayPointer(y);
-    double *dx = N_VGetArrayPointer(ydot);
     double lam[KL_R + 1], mu[KL_S + 1];
     memcpy(dx, x + KL_M, KL_M * sizeof(double));
     int stop = kl_control_evaluate(data->o, t, x, x + KL_M);
@@ -132,6 +132,11 @@ static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
     data->t_singular = t;
     memcpy(data->y_singular, x, sizeof data->y_singular);
     return -1;
+}
+
+static int kl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *user_data)
+{
+    return kl_index1_rhs(user_data, t, N_VGetArrayPointer(y), N_VGetArrayPointer(ydot));
 }
 
 /* Limits: CVODE's root functions, the watched functions of limits.c at (t, y); the contact forces
@@ -224,6 +229,55 @@ static int kl_project(double t, double *x, const kl_data *data)
 {
     double terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1];
     return kl_project_from(t, x, data, terms, B, c, 0);
+}
+
+/* The run's data (the rank of [Phi_q; A] at the start: the cap of the right-hand side) and the
+ * watch of singular configurations from o->t0, o->y0; terms, B and c hold the constraints there
+ * (shared with dop853.c). */
+static void kl_index1_start(kronlag_options *o, const double *p, kl_data *data, kl_monitor *monitor, double *terms,
+                            double *B, double *c)
+{
+    *data = (kl_data){p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}, o, 0};
+    kl_constraints(o->t0, o->y0, p, terms, B, c);
+    if (KL_K > 0) {
+        double magnitudes[KL_K + 1];
+        int perm[KL_K + 1];
+        rank_magnitudes(B, KL_K, KL_M, magnitudes, perm);
+        data->generic_rank = rank_of(magnitudes, KL_K < KL_M ? KL_K : KL_M);
+    }
+    kl_monitor_start(monitor, o->t0, o->y0, terms + KL_PHI_Q, o->events, o->max_events);
+}
+
+/* The watch of singular configurations after a step to (t, x): the singular ratio there (1 without
+ * holonomic constraints).  With outputs at every step (at_x) the constraints at x, evaluated into
+ * terms, B, c, serve it and the projection of the output at t (x itself); else it needs only Phi_q:
+ * its own kernel, far smaller than the dynamics. */
+static double kl_watch_step(kl_monitor *monitor, double t, const double *x, const double *p, double *terms,
+                            double *B, double *c, int at_x)
+{
+    if (at_x) kl_constraints(t, x, p, terms, B, c);
+    if (KL_R == 0) return 1.0;
+    double zero[KL_M + 1] = {0.0}, Phi_q[KL_R * KL_M + 1];
+    if (!at_x) kronlag_Phi_q(t, x, zero, p, Phi_q);
+    return kl_monitor_observe(monitor, t, x, at_x ? terms + KL_PHI_Q : Phi_q);
+}
+
+/* The outputs at the step's end t, x (the integrator's state, copied): with outputs at every step
+ * (n_eval == 0) one row, else a row for each output time at t; each projected (at_x: terms, B, c hold
+ * the constraints at x).  *rows, *next advanced.  Returns 0 or KRONLAG_RESULT_PROJECTION_FAILED. */
+static int kl_outputs_at(kronlag_options *o, const kl_data *data, double t, const double *x, int *rows, int *next,
+                         double *terms, double *B, double *c, int at_x)
+{
+    for (int at_t = o->n_eval == 0; at_t || (*next < o->n_eval && o->t_eval[*next] <= t); at_t = 0) {
+        double *row = o->y_out + *rows * KL_N;
+        o->t_out[*rows] = t;
+        memcpy(row, x, KL_N * sizeof(double));
+        kl_control_record(o, *rows);
+        if (kl_project_from(t, row, data, terms, B, c, at_t && at_x)) return KRONLAG_RESULT_PROJECTION_FAILED;
+        ++*rows;
+        if (o->n_eval > 0) ++*next;
+    }
+    return 0;
 }
 
 /* Name of a return value of kronlag_cvode that is reported as KRONLAG_RESULT_SOLVER_FAILED (the
@@ -322,7 +376,7 @@ int kronlag_cvode(kronlag_options *o)
     memcpy(y_end, o->y0, KL_N * sizeof(double));
     if (major != 7) return KL_VERSION_MISMATCH;
     int n_eval = o->n_eval;
-    kl_data data = {p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}, o, 0};
+    kl_data data;
     double t_sample = kl_control_next_sample(o);  /* INFINITY without a sampled controller */
     kl_cvode_counters counted = {0, 0, 0, 0};
     SUNContext ctx = NULL;
@@ -335,14 +389,7 @@ int kronlag_cvode(kronlag_options *o)
     double t = t0, terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1];
     kl_monitor monitor;
     kl_progress progress = {kl_clock()};
-    kl_constraints(t0, o->y0, p, terms, B, c);
-    if (KL_K > 0) {
-        double magnitudes[KL_K + 1];
-        int perm[KL_K + 1];
-        rank_magnitudes(B, KL_K, KL_M, magnitudes, perm);
-        data.generic_rank = rank_of(magnitudes, KL_K < KL_M ? KL_K : KL_M);
-    }
-    kl_monitor_start(&monitor, t0, o->y0, terms + KL_PHI_Q, o->events, o->max_events);
+    kl_index1_start(o, p, &data, &monitor, terms, B, c);
     if (SUNContext_Create(0, &ctx) || SUNContext_ClearErrHandlers(ctx)) goto done;
     if (!(y = N_VNew_Serial(KL_N, ctx)) || !(dense = N_VNew_Serial(KL_N, ctx)) || !(J = SUNDenseMatrix(KL_N, KL_N, ctx))
         || !(LS = SUNLinSol_Dense(y, J, ctx)) || !(mem = CVodeCreate(CV_ADAMS, ctx))) goto done;
@@ -394,17 +441,8 @@ int kronlag_cvode(kronlag_options *o)
         CVodeGetLastOrder(mem, &order);
         if (!o->lowest_order || order < o->lowest_order) o->lowest_order = order;
         if (order > o->highest_order) o->highest_order = order;
-        double ratio = 1.0;
-        /* With outputs at every step, the constraints at x serve the watch and the projection of the
-         * output at t (x itself); else the watch needs only Phi_q: its own kernel, far smaller than the
-         * dynamics. */
         int at_x = n_eval == 0 && KL_K > 0;
-        if (at_x) kl_constraints(t, x, p, terms, B, c);
-        if (KL_R > 0) {
-            double zero[KL_M + 1] = {0.0}, Phi_q[KL_R * KL_M + 1];
-            if (!at_x) kronlag_Phi_q(t, x, zero, p, Phi_q);
-            ratio = kl_monitor_observe(&monitor, t, x, at_x ? terms + KL_PHI_Q : Phi_q);
-        }
+        double ratio = kl_watch_step(&monitor, t, x, p, terms, B, c, at_x);
         /* outputs before t (interpolated); at a sample instant the controller is called and CVODE
          * restarted; then the output at t itself, with the parameters that hold from t on */
         for (; n_eval > 0 && next < n_eval && t_eval[next] < t; ++next, ++rows) {
@@ -420,18 +458,7 @@ int kronlag_cvode(kronlag_options *o)
         if (flag) break;
         if (t >= t_sample && t < t1 && (flag = kl_cvode_sample(o, mem, y, t, &t_sample, &counted))) break;
         if (n_eval == 0 && rows == o->max_rows) { flag = KRONLAG_RESULT_OUTPUTS_FULL; break; }
-        for (int at_t = n_eval == 0; at_t || (next < n_eval && t_eval[next] <= t); at_t = 0) {
-            o->t_out[rows] = t;
-            memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
-            kl_control_record(o, rows);
-            if (kl_project_from(t, y_out + rows * KL_N, &data, terms, B, c, at_t && at_x)) {
-                flag = KRONLAG_RESULT_PROJECTION_FAILED;
-                break;
-            }
-            ++rows;
-            if (n_eval > 0) ++next;
-        }
-        if (flag) break;
+        if ((flag = kl_outputs_at(o, &data, t, x, &rows, &next, terms, B, c, at_x))) break;
         if (rooted) { flag = KRONLAG_RESULT_LIMIT; break; }  /* limits: CVODE stopped at the root, t and x are there */
         int stop = kl_progress_report(o, &progress, t);
         if (stop) { flag = stop; break; }

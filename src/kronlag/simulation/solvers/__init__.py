@@ -7,11 +7,12 @@ from ..problem import Solver
 from .ali3p import Index3Solver
 from .baumgarte import BaumgarteSolver
 from .compiled import CompiledSolver
+from .compiled_dop853 import CompiledDOP853Solver
 from .ggl import GGLSolver
 from .projection import ProjectionSolver
 from .switching import SwitchingSolver
 
-__all__ = ["METHODS", "AUTO_PREFERENCE", "SAMPLED_PREFERENCE", "BaumgarteSolver", "ProjectionSolver", "GGLSolver", "CompiledSolver",
+__all__ = ["METHODS", "AUTO_PREFERENCE", "SAMPLED_PREFERENCE", "BaumgarteSolver", "ProjectionSolver", "GGLSolver", "CompiledSolver", "CompiledDOP853Solver",
            "Index3Solver", "SwitchingSolver"]
 
 
@@ -21,6 +22,7 @@ METHODS: dict[str, type[Solver]] = {
     ProjectionSolver.name: ProjectionSolver,
     GGLSolver.name: GGLSolver,
     CompiledSolver.name: CompiledSolver,
+    CompiledDOP853Solver.name: CompiledDOP853Solver,
     Index3Solver.name: Index3Solver,
     SwitchingSolver.name: SwitchingSolver,
 }

@@ -17,7 +17,7 @@ from ..trajectory import Result
 if TYPE_CHECKING:
     from ...numeric.numeric_model import NumericModel
 
-__all__ = ["CompiledSolver", "cvode_segment"]
+__all__ = ["CompiledSolver", "compiled_solution", "cvode_segment"]
 
 
 class CompiledSolver(Solver):
@@ -72,11 +72,16 @@ class CompiledSolver(Solver):
 
     def solve(self, problem: MultibodyProblem) -> Solution:
         require(self, problem.model)
-        segment = cvode_segment(problem, self.options, problem.t0, problem.y0)
-        if segment.flag == Result.APPROACH.code:  # the approach is an event too
-            approach = ApproachWatch(problem).observe(segment.t_end, segment.y_end)
-            segment = replace(segment, events=segment.events + ((approach,) if approach else ()))
-        return solution_of([segment], *segment_status(segment, problem.model, "cvode"))
+        return compiled_solution(problem, cvode_segment(problem, self.options, problem.t0, problem.y0), "cvode")
+
+
+def compiled_solution(problem: MultibodyProblem, segment: Segment, kind: str) -> Solution:
+    """The :class:`Solution` of one run of the driver ``kind`` over the whole span; an approach to a
+    singular configuration, where the run ended, is an event too."""
+    if segment.flag == Result.APPROACH.code:
+        approach = ApproachWatch(problem).observe(segment.t_end, segment.y_end)
+        segment = replace(segment, events=segment.events + ((approach,) if approach else ()))
+    return solution_of([segment], *segment_status(segment, problem.model, kind))
 
 
 def cvode_segment(problem: MultibodyProblem, options: SolverOptions, t0: float, y0: np.ndarray) -> Segment:
