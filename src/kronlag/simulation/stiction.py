@@ -239,6 +239,7 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
     for j in dead:  # kinematic dead points (the constraints alone zero the rate here): the rate passes zero
         new[j] = -modes[j]
     stopped = [j for j in stopped if j not in dead]
+    stopped += _stopped_with(base, rows, rates, modes, stopped, dead, rank_rtol, rest)
     if stopped:  # held together, each group by its own hold (module docstring, and above)
         holds = [j for j, mode in enumerate(new) if mode == MODE_HELD]
         locked = [j for j, mode in enumerate(new) if mode == MODE_LOCKED]
@@ -279,6 +280,31 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
                               f"{threshold:.6g} but not surely the group's ({capacity:.6g} with the loads "
                               "without the others' friction)")
     return tuple(_consistent(variant_of, new, t, y, rest, names)), found
+
+
+def _stopped_with(base: np.ndarray, rows: list[np.ndarray], rates: list[float], modes: tuple[int, ...],
+                  stopped: list[int], dead: list[int], rank_rtol: float, rest: float) -> list[int]:
+    """The sliding joints (not in ``stopped`` or ``dead``) that the joints ``stopped`` and the holds stop too:
+    a joint whose row is a combination of the constraints' rows and theirs (``v = sum_k c_k v_k`` plus the
+    rate the constraints themselves impose, e.g. a drive's) has the rate ``v - sum_k c_k v_k`` when they stand
+    still, zero (within ``rest``) for a linkage without drives.  Such a joint stops with them, whatever its
+    own residual rate ``v`` (of the order of theirs, ``c_k`` times the root's rounding, on either side of the
+    at-rest limit): it is decided with them (held or locked), not left sliding at a rate zero by the
+    constraints, which made the decision hang on the last bits of ``v``."""
+    anchors = [j for j, mode in enumerate(modes) if mode == MODE_HELD] + stopped
+    if not stopped:
+        return []
+    found = []
+    for i, mode in enumerate(modes):
+        if mode not in (1, -1) or i in stopped or i in dead:
+            continue
+        held_rows = np.vstack([base, *[rows[k][None, :] for k in anchors]])
+        if not _dependent(held_rows, rows[i], rank_rtol):
+            continue
+        ratios = _ratios(base, [rows[k] for k in anchors], rows[i])
+        if abs(rates[i] - sum(c * rates[k] for c, k in zip(ratios, anchors))) <= rest:
+            found.append(i)
+    return found
 
 
 def _slides_as_whole(variant_of: Callable[[tuple[int, ...]], NumericModel], trial: tuple[int, ...], hold: int,
