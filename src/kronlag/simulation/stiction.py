@@ -240,6 +240,7 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
         new[j] = -modes[j]
     stopped = [j for j in stopped if j not in dead]
     stopped += _stopped_with(base, rows, rates, modes, stopped, dead, rank_rtol, rest)
+    stopped.sort(key=lambda j: -_mobility(base, rows[j]))  # the holds: the freest joints first (_mobility)
     if stopped:  # held together, each group by its own hold (module docstring, and above)
         holds = [j for j, mode in enumerate(new) if mode == MODE_HELD]
         locked = [j for j, mode in enumerate(new) if mode == MODE_LOCKED]
@@ -280,6 +281,19 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
                               f"{threshold:.6g} but not surely the group's ({capacity:.6g} with the loads "
                               "without the others' friction)")
     return tuple(_consistent(variant_of, new, t, y, rest, names)), found
+
+
+def _mobility(base: np.ndarray, row: np.ndarray) -> float:
+    """The norm of ``row``'s part outside the row space of ``base``: how fast the joint's rate goes for a unit
+    allowed motion.  The joints that stop together are held in decreasing order of it, so that a locked
+    group's hold is its freest joint (rate ratios of the others at most about 1: the group's capacity read
+    with a good leverage), whichever of them the root finder flagged first (a joint near its own dead point
+    as the hold needs a holding force of the order of 1 / its rate, and the capacity read from it is as
+    far off)."""
+    if not len(base):
+        return float(np.linalg.norm(row))
+    coefficients = np.linalg.lstsq(base.T, row, rcond=None)[0]
+    return float(np.linalg.norm(row - base.T @ coefficients))
 
 
 def _stopped_with(base: np.ndarray, rows: list[np.ndarray], rates: list[float], modes: tuple[int, ...],
