@@ -305,6 +305,45 @@ def test_four_bar_stopping_in_all_pins_is_decided_whatever_the_residual_rates(tm
     assert events == tuple(sorted((name, "reverse") for name in names))
 
 
+def test_four_bar_dead_point_reversals_turn_inside_the_compiled_run(tmp_path, monkeypatch):
+    """The four-bar's single-pin reversals are kinematic dead points (the pin's rate zero for every motion
+    the loop allows, so it passes through zero): the compiled driver turns those directions itself (kl_turn
+    in c/cvode.c) and returns to Python only at the three instants where the whole linkage stops -- 4 driver
+    runs instead of one per event instant (18) -- with the same events (joints, kinds, times to 1e-9), the
+    same pieces of the trajectory (one model each) and an energy balance that closes as when every event
+    goes back to Python (turning disabled: _MAX_TURNS = 0)."""
+    import kronlag.simulation.impacts as impacts
+    import kronlag.simulation.solvers.compiled as compiled
+
+    model, q0, qd0 = _exact_example("four_bar_friction", tmp_path)
+    starts = []
+    segment = impacts._LimitRun._segment
+
+    def counted(self, solver, problem):
+        starts.append(problem.t0)
+        return segment(self, solver, problem)
+
+    monkeypatch.setattr(impacts._LimitRun, "_segment", counted)
+    runs = {}
+    for turns in (1000, 0):
+        monkeypatch.setattr(compiled, "_MAX_TURNS", turns)
+        starts.clear()
+        trajectory = kronlag.simulate(model, (0, 2.0), q0, qd0, method="compiled", rtol=1e-10, atol=1e-12)
+        assert trajectory.success, trajectory.message
+        runs[turns] = (trajectory, len(starts))
+    (inside, inside_runs), (outside, outside_runs) = runs[1000], runs[0]
+    assert (inside_runs, outside_runs) == (4, 18)
+    events = [_stiction_events(trajectory) for trajectory in (inside, outside)]
+    assert [(event.joint, event.kind) for event in events[0]] == [(event.joint, event.kind) for event in events[1]]
+    np.testing.assert_allclose([event.t for event in events[0]], [event.t for event in events[1]], rtol=0, atol=1e-9)
+    assert len(inside.segments) == len(outside.segments) == 18
+    assert np.max(inside.columns()["friction_power"]) <= 1e-9
+    lost = inside.total_energy[0] - inside.total_energy
+    np.testing.assert_allclose(lost, -inside.friction_work, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(inside.q[-1], outside.q[-1], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(inside.qd[-1], outside.qd[-1], rtol=0, atol=1e-6)
+
+
 def test_a_stop_on_a_joint_with_exact_friction_is_refused_where_the_load_division_is_indeterminate():
     """The block slides down the incline (tan alpha > mu_s) onto a stop across its guide (e = 0): resting on
     the stop, its guide's friction and the stop's contact force share one motion and any division of the

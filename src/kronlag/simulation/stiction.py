@@ -22,7 +22,9 @@ The rule at the start: a joint whose rate is within :data:`~kronlag.numeric.tole
 ``atol`` of zero is at rest and decided as a joint that has just stopped (all such joints held
 together: each sticks if its holding force is within ``r mu_s N``, else slides in that force's
 direction); any other slides in the direction of its rate.  Joints that stop at one instant are
-decided together in the same way.  A joint whose rate the holds make zero for every allowed motion is
+decided together in the same way, with every sliding joint whose rate the constraints tie to theirs
+(:func:`_stopped_with`).  Joints at kinematic dead points are turned inside the compiled run where it is
+sure of the decision (``kl_turn`` in ``c/cvode.c``, :meth:`.impacts._LimitRun._pieces`).  A joint whose rate the holds make zero for every allowed motion is
 *locked* to them (:data:`MODE_LOCKED`, no force of its own, no events) and its group is decided as a
 whole (:func:`_decide`); where that takes dividing the holding force among the group, a run refuses.  Each transition is a :class:`~.trajectory.StictionEvent` in
 ``trajectory.events``.
@@ -46,7 +48,7 @@ from ..model.friction import (
 from ..numeric.friction import friction_joints, friction_records, sticking_limit
 from ..core.errors import NumericalError
 from ..numeric.numeric_model import NumericModel
-from ..numeric.tolerances import AT_REST, TIED_RATIO, matrix_rank
+from ..numeric.tolerances import AT_REST, RATE_CHANGE_STEP, TIED_RATIO, matrix_rank
 from ..symbolic.derivation import derive
 from .controllers import ControlledModel
 from .trajectory import StictionEvent
@@ -151,7 +153,7 @@ def _rate_changes(model: NumericModel, t: float, y: np.ndarray, now: list[dict])
     m = model.m
     q, qd = y[:m], y[m:]
     qdd = model.forward_dynamics(q, qd, t).qdd
-    step = 1e-7 * max(1.0, abs(t))
+    step = RATE_CHANGE_STEP * max(1.0, abs(t))
     ahead = friction_records(model, t + step, q + step * qd, qd + step * qdd)
     return np.array([(float(a["J"] @ (qd + step * qdd)) - float(b["J"] @ qd)) / step for a, b in zip(ahead, now)])
 
