@@ -14,8 +14,9 @@ rotating from block to block) so that a change of the machine's load hits all; a
 CPU time of this process (``time.process_time``), the ratio the median of the blocks' ratios.
 Printed per run, where the cost goes: CVODE's steps, its right-hand-side evaluations (with the
 Jacobians' columns), the output rows (one forward dynamics each, with the friction solved), the
-stiction events and the segments they cut the run into (CVODE restarts at order 1 at each); the ratio
-of the times and per evaluation (``time / (evaluations + rows)`` over the frictionless one's).
+stiction events and the segments they cut the run into (CVODE restarts at order 1 at each: inside the
+compiled driver at a kinematic dead point, where a pin's direction turns without a return to Python, else
+from Python after it decided the new modes); the ratio of the times and per evaluation (``time / (evaluations + rows)`` over the frictionless one's).
 Target (issue 18): a ratio <= 1.5, for both laws (``--law both``, the default).  ``--quick``: 3 blocks.
 """
 

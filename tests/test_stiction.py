@@ -264,6 +264,86 @@ def test_four_bar_with_exact_friction_in_every_pin_rubs_against_every_rate(tmp_p
     np.testing.assert_allclose(lost, -trajectory.friction_work, rtol=0, atol=1e-8)
 
 
+def test_four_bar_stopping_in_all_pins_is_decided_whatever_the_residual_rates(tmp_path, monkeypatch):
+    """At the four-bar's all-pins-stop instant (t = 0.9149) the pins' rates cross zero together (the rates
+    are one pin's times rate ratios): which of them the root finder flags and the residual rates, ~1e-12 on
+    either side of the at-rest limit (atol), hang on the last bits (the run's step sequence).  The pins stop
+    together because the constraints make them (each pin's row is a combination of the loop's and one
+    pin's), so the decision -- the whole linkage reverses, every pin at once -- must not change with the pins
+    flagged or with those rates scaled by 1/10 or 10 (before: the rocker pin flagged alone left the crank pin
+    sliding at 1.2e-12 while the others were decided, and it reversed in a second decision at the same
+    instant; with the rates scaled by 1/10, all four were decided together; and the rocker pivot flagged
+    alone, near its own dead point, held the group with a poor leverage and the run refused)."""
+    import kronlag.simulation.impacts as impacts
+
+    model, q0, qd0 = _exact_example("four_bar_friction", tmp_path)
+    calls = []
+
+    def recorded(variant_of, modes, triggered, t, y, names, rest):
+        calls.append((variant_of, modes, list(triggered), t, y.copy(), names, rest))
+        return impacts_transition(variant_of, modes, triggered, t, y, names, rest)
+
+    impacts_transition = impacts.transition
+    monkeypatch.setattr(impacts, "transition", recorded)
+    trajectory = kronlag.simulate(model, (0, 0.92), q0, qd0, rtol=1e-10, atol=1e-12)
+    assert trajectory.success, trajectory.message
+    at_stop = [call for call in calls if abs(call[3] - 0.91494) < 1e-4]
+    assert at_stop, [call[1:4] for call in calls]
+    variant_of, modes, _, t, y, names, rest = at_stop[0]
+    m = len(y) // 2
+    rocker_pin = names.index("rocker pin")
+    decisions = set()
+    for flagged in ([[j] for j in range(len(names))] + [sorted({rocker_pin, names.index("crank pin")})]
+                    + [list(range(len(names)))]):
+        for scale in (0.1, 1.0, 10.0):
+            scaled = np.concatenate([y[:m], scale * y[m:]])
+            new, events = impacts_transition(variant_of, modes, flagged, t, scaled, names, rest)
+            decisions.add((new, tuple(sorted((event.joint, event.kind) for event in events))))
+    assert len(decisions) == 1, decisions
+    new, events = decisions.pop()
+    assert new == tuple(-mode for mode in modes)  # the linkage reverses: every pin's friction turns
+    assert events == tuple(sorted((name, "reverse") for name in names))
+
+
+def test_four_bar_dead_point_reversals_turn_inside_the_compiled_run(tmp_path, monkeypatch):
+    """The four-bar's single-pin reversals are kinematic dead points (the pin's rate zero for every motion
+    the loop allows, so it passes through zero): the compiled driver turns those directions itself (kl_turn
+    in c/cvode.c) and returns to Python only at the three instants where the whole linkage stops -- 4 driver
+    runs instead of one per event instant (18) -- with the same events (joints, kinds, times to 1e-9), the
+    same pieces of the trajectory (one model each) and an energy balance that closes as when every event
+    goes back to Python (turning disabled: _MAX_TURNS = 0)."""
+    import kronlag.simulation.impacts as impacts
+    import kronlag.simulation.solvers.compiled as compiled
+
+    model, q0, qd0 = _exact_example("four_bar_friction", tmp_path)
+    starts = []
+    segment = impacts._LimitRun._segment
+
+    def counted(self, solver, problem):
+        starts.append(problem.t0)
+        return segment(self, solver, problem)
+
+    monkeypatch.setattr(impacts._LimitRun, "_segment", counted)
+    runs = {}
+    for turns in (1000, 0):
+        monkeypatch.setattr(compiled, "_MAX_TURNS", turns)
+        starts.clear()
+        trajectory = kronlag.simulate(model, (0, 2.0), q0, qd0, method="compiled", rtol=1e-10, atol=1e-12)
+        assert trajectory.success, trajectory.message
+        runs[turns] = (trajectory, len(starts))
+    (inside, inside_runs), (outside, outside_runs) = runs[1000], runs[0]
+    assert (inside_runs, outside_runs) == (4, 18)
+    events = [_stiction_events(trajectory) for trajectory in (inside, outside)]
+    assert [(event.joint, event.kind) for event in events[0]] == [(event.joint, event.kind) for event in events[1]]
+    np.testing.assert_allclose([event.t for event in events[0]], [event.t for event in events[1]], rtol=0, atol=1e-9)
+    assert len(inside.segments) == len(outside.segments) == 18
+    assert np.max(inside.columns()["friction_power"]) <= 1e-9
+    lost = inside.total_energy[0] - inside.total_energy
+    np.testing.assert_allclose(lost, -inside.friction_work, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(inside.q[-1], outside.q[-1], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(inside.qd[-1], outside.qd[-1], rtol=0, atol=1e-6)
+
+
 def test_a_stop_on_a_joint_with_exact_friction_is_refused_where_the_load_division_is_indeterminate():
     """The block slides down the incline (tan alpha > mu_s) onto a stop across its guide (e = 0): resting on
     the stop, its guide's friction and the stop's contact force share one motion and any division of the

@@ -50,7 +50,7 @@ from ..core.errors import InputError
 
 __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAVE_RTOL", "MAX_PROJECTION_ITERATIONS",
            "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "ZERO_EIGENVALUE_RTOL", "RESTING_GAP",
-           "CONTACT_GAP", "AT_REST", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "SAME_INSTANT", "integrator_tolerances",
+           "CONTACT_GAP", "AT_REST", "RATE_CHANGE_STEP", "TURN_RTOL", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "SAME_INSTANT", "integrator_tolerances",
            "zero_eigenvalue_threshold", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes",
            "singular_ratio", "c_macros", "REDUNDANCY_PROBE", "REDUNDANCY_PROBE_RESIDUAL"]
 
@@ -124,6 +124,14 @@ AT_REST = 1.0
 #: A joint locked to held ones (exact stiction) is tied to the holds whose rate ratio exceeds this times
 #: its largest ratio (the least-squares ratios of the others are rounding).
 TIED_RATIO = 1e-9
+#: The rate of change of a joint's rate at an event (exact stiction: which way a joint at rest goes) is
+#: the change of its rate over a step of this times ``max(1, |t|)`` along the motion, divided by the step.
+RATE_CHANGE_STEP = 1e-7
+#: A sliding joint whose rate falls through zero turns its direction inside a compiled run (without a
+#: return to Python) only at a kinematic dead point the rank policy is sure of: the part of its row
+#: ``J_rate`` outside the constraints' row space at most this times ``rank_rtol`` times the largest
+#: constraint row's norm (the rank policy calls it dependent below ``rank_rtol``); else Python decides.
+TURN_RTOL = 0.1
 
 
 def integrator_tolerances(rtol: float, atol: float, scale: float,
@@ -197,7 +205,8 @@ def c_macros(rank_rtol: float) -> str:
             f"#define KRONLAG_LEAVE_RTOL {LEAVE_RTOL!r}\n"
             f"#define KRONLAG_MAX_PROJECTION_ITERATIONS {MAX_PROJECTION_ITERATIONS}\n"
             f"#define KRONLAG_STALL {STALL!r}\n#define KRONLAG_FRICTION_RTOL {FRICTION_RTOL!r}\n"
-            f"#define KRONLAG_FRICTION_MAX_ITERATIONS {FRICTION_MAX_ITERATIONS}\n")
+            f"#define KRONLAG_FRICTION_MAX_ITERATIONS {FRICTION_MAX_ITERATIONS}\n"
+            f"#define KRONLAG_RATE_CHANGE_STEP {RATE_CHANGE_STEP!r}\n#define KRONLAG_TURN_RTOL {TURN_RTOL!r}\n")
 
 
 #: Recursive dynamics kernels (:mod:`kronlag.numeric.codegen.recursive`): a robot link's frame must move

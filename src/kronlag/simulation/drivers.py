@@ -230,6 +230,8 @@ class Segment:
     triggered: tuple[int, ...] = ()
     #: Under a controller, the parameters at the outputs (N, P) (:attr:`Solution.parameters`).
     parameters: np.ndarray | None = None
+    #: Exact stiction: the directions the driver turned itself (:attr:`Solution.turns`).
+    turns: np.ndarray | None = None
 
     @property
     def hands_over(self) -> bool:
@@ -252,16 +254,16 @@ def output_rows(problem: MultibodyProblem, t0: float, options: SolverOptions) ->
     return times, len(times)
 
 
-def _buffers(model: NumericModel, rows: int, watched: int, controlled: bool) -> dict[str, np.ndarray]:
+def _buffers(model: NumericModel, rows: int, watched: int, controlled: bool, turns: int) -> dict[str, np.ndarray]:
     """The output buffers of :class:`~.interface.DriverOptions` by field name: ``t_out`` (rows,),
     ``y_out`` (rows, 2 m), the derived quantities of :class:`Solution` (rows, ...), ``events``,
     ``y_end``, the limits' ``roots`` (``watched`` functions) and ``p_out`` (rows, P) under a
-    controller; C-contiguous parts of one block (one allocation: with outputs at every step, ``rows``
+    controller, ``turns`` (``turns`` rows, exact stiction); C-contiguous parts of one block (one allocation: with outputs at every step, ``rows``
     is large and the driver touches only the rows it writes)."""
     m, r, s = model.m, model.r, model.s
     shapes = {"t_out": (rows,), "y_out": (rows, 2 * m), **derived_shapes(rows, m, r, s),
               "events": (_MAX_EVENTS, 5 + m), "y_end": (2 * m,), "roots": (max(watched, 1),),
-              "p_out": (rows if controlled else 0, len(model.parameter_names))}
+              "p_out": (rows if controlled else 0, len(model.parameter_names)), "turns": (max(turns, 1), 2 + 4 * m)}
     ends = list(accumulate((math.prod(shape) for shape in shapes.values()), initial=0))
     block = _block(ends[-1])
     return {name: block[start:end].reshape(shape) for (name, shape), start, end in zip(shapes.items(), ends, ends[1:])}
@@ -292,7 +294,8 @@ def run(kind: str, problem: MultibodyProblem, options: SolverOptions, t0: float,
     times, rows = output_rows(problem, t0, options)
     watch = problem.watch
     loop = model.loop if isinstance(model, ControlledModel) else None
-    buffers = _buffers(model, rows, watch.size if watch else 0, loop is not None)
+    turns = int(inputs.get("max_turns", 0))
+    buffers = _buffers(model, rows, watch.size if watch else 0, loop is not None, turns)
     p = model.parameter_vector(t0)
     arrays = {"p": p, "y0": y0, "t_eval": times}
     arrays |= {name: value for name, value in inputs.items() if isinstance(value, np.ndarray)}
@@ -323,7 +326,8 @@ def run(kind: str, problem: MultibodyProblem, options: SolverOptions, t0: float,
                    t_end=arguments.t_end, y_end=buffers["y_end"].copy(), steps=arguments.steps, nfev=arguments.nfev,
                    njev=arguments.njev, orders=(arguments.lowest_order, arguments.highest_order),
                    triggered=tuple(np.flatnonzero(buffers["roots"][:watch.size]).tolist()) if watch else (),
-                   parameters=buffers["p_out"][:n].copy() if loop is not None else None)
+                   parameters=buffers["p_out"][:n].copy() if loop is not None else None,
+                   turns=buffers["turns"][:arguments.n_turns].copy() if turns else None)
 
 
 def segment_status(segment: Segment, model: NumericModel, kind: str) -> tuple[Result, str]:
@@ -362,7 +366,14 @@ def solution_of(segments: Sequence[Segment], result: Result, message: str) -> So
                     events=tuple(event for segment in segments for event in segment.events),
                     stop=_limit_stop(segments[-1]),
                     parameters=None if segments[0].parameters is None
-                    else joined([segment.parameters for segment in segments]))
+                    else joined([segment.parameters for segment in segments]),
+                    turns=_turns(segments))
+
+
+def _turns(segments: Sequence[Segment]) -> np.ndarray | None:
+    """The directions the drivers of ``segments`` turned (:attr:`Solution.turns`), None where none could."""
+    turns = [segment.turns for segment in segments if segment.turns is not None]
+    return np.concatenate(turns) if turns else None
 
 
 def _limit_stop(segment: Segment) -> LimitStop | None:

@@ -46,7 +46,7 @@ from .energy import Segment
 from .problem import MultibodyProblem, Solution, Solver, derived_shapes
 from .stepping import stopped_text
 from .stiction import after_impulse, check_not_stopped_by_contacts, held_forces, start_modes, stiction_model, transition
-from .trajectory import LimitEvent, Result
+from .trajectory import LimitEvent, Result, StictionEvent
 from .watch import LimitWatch
 
 __all__ = ["contact_model", "has_events", "has_limits", "solve_with_limits"]
@@ -177,7 +177,7 @@ class _LimitRun:
             watch = LimitWatch(self.kernels, np.array([i not in self.active for i in range(n)]),
                                tuple(range(self.model.r, variant.r)), self.first_step,
                                None if variant.time_varying else variant.parameter_vector(t),
-                               len(self.friction_names))
+                               len(self.friction_names), AT_REST * self.options.atol if self.stiction else 0.0)
             self.first_step = 0.0
             t_eval = problem.t_eval
             if t_eval is not None and t > problem.t0:
@@ -190,11 +190,11 @@ class _LimitRun:
             steps, nfev, njev = steps + solution.steps, nfev + solution.nfev, njev + solution.njev
             self.events += solution.events
             self.intervals += solution.intervals
-            if keep and len(solution.t):
-                self._keep(solution, variant)
-            self.segments.append(Segment(variant.uncontrolled if isinstance(variant, ControlledModel) else variant,
-                                         len(solution.t) if keep else 0, (t, y.copy()),
-                                         None if solution.stop is None else (solution.stop.t, solution.stop.y.copy())))
+            for piece, model, start, end in self._pieces(solution, variant, (t, y.copy())):
+                if keep and len(piece.t):
+                    self._keep(piece, model)
+                self.segments.append(Segment(model.uncontrolled if isinstance(model, ControlledModel) else model,
+                                             len(piece.t) if keep else 0, start, end))
             if solution.result is not Result.LIMIT or solution.stop is None:
                 return self._solution(solution.result, solution.message, steps, nfev, njev)
             same_time = same_time + 1 if last_t is not None and solution.stop.t <= last_t else 0
@@ -208,6 +208,29 @@ class _LimitRun:
                 assert stop is not None  # _sample_at recorded the controller's error
                 return self._solution(stop, stopped_text(solution.stop.t, stop), steps, nfev, njev)
             t, y = solution.stop.t, self._events(solution.stop.t, solution.stop.y, solution.stop.triggered)
+
+    def _pieces(self, solution: Solution, variant: NumericModel, start: tuple[float, np.ndarray]):
+        """The pieces of a segment's ``solution`` (which began at ``start`` with the model ``variant``) between
+        the sliding directions its driver turned itself (:attr:`~.problem.Solution.turns`): ``(outputs, model,
+        start, end)`` each, the modes and events updated at each turn as :func:`~.stiction.transition` does at
+        a kinematic dead point ('reverse', no force).  One piece without turns."""
+        m = self.problem.m
+        first, turns = 0, solution.turns if solution.turns is not None else np.empty((0, 2 + 4 * m))
+        for t_turn in np.unique(turns[:, 0]):
+            rows = turns[turns[:, 0] == t_turn]
+            before, after = rows[0, 2:2 + 2 * m].copy(), rows[0, 2 + 2 * m:].copy()
+            end = first + int(np.searchsorted(solution.t[first:], t_turn))
+            end += end < len(solution.t) and solution.t[end] == t_turn  # an output at the turn: the old side's
+            yield _rows(solution, first, end), variant, start, (float(t_turn), before)
+            modes = list(self.modes)
+            for j in rows[:, 1].astype(int):
+                modes[j] = -modes[j]
+                self.events.append(StictionEvent(t=float(t_turn), joint=self.friction_names[j], kind="reverse",
+                                                 q=before[:m].copy()))
+            self.modes = tuple(modes)
+            variant, start, first = contact_model(self.base, self.active), (float(t_turn), after), end
+        stop = solution.stop
+        yield _rows(solution, first, len(solution.t)), variant, start, None if stop is None else (stop.t, stop.y.copy())
 
     def _segment(self, solver: Solver, segment: MultibodyProblem) -> Solution:
         """One segment by ``solver``; under a sampled controller that the solver cannot stop at itself,
@@ -391,3 +414,13 @@ class _LimitRun:
         return Solution(t=t, y=y, result=result, message=message, nfev=nfev, njev=njev, steps=steps,
                         derived=joined, events=events, parameters=parameters, intervals=tuple(self.intervals),
                         segments=tuple(self.segments))
+
+
+def _rows(solution: Solution, first: int, end: int) -> Solution:
+    """``solution`` with its output rows ``first:end`` alone."""
+    if first == 0 and end == len(solution.t):
+        return solution
+    return replace(solution, t=solution.t[first:end], y=solution.y[first:end],
+                   derived=None if solution.derived is None else {key: value[first:end]
+                                                                  for key, value in solution.derived.items()},
+                   parameters=None if solution.parameters is None else solution.parameters[first:end])

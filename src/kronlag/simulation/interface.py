@@ -95,6 +95,12 @@ FIELDS: tuple[tuple[str, type, str, str], ...] = (
     ("n_contacts", _I, "in", "contact constraints whose force -lam is watched"),
     ("contact_rows", _DOUBLES, "in", "their rows of lam (n_contacts)"),
     ("roots", _DOUBLES, "out", "1 for each watched function that fell through zero (n_gaps + n_contacts)"),
+    # exact stiction: sliding directions turned inside the run at kinematic dead points (c/cvode.c kl_turn)
+    ("max_turns", _I, "in", "rows of turns (0: every stiction event ends the segment)"),
+    ("at_rest", _D, "in", "a sliding joint's rate within this is at rest (an event for Python then)"),
+    ("turns", _DOUBLES, "out", "per joint turned: t, the joint's index, [q, qd] before and after the "
+     "projection there (max_turns x (2 + 4 m))"),
+    ("n_turns", _I, "out", "rows of turns written"),
     # a controller in the loop (simulation/controllers.py, c/controller.c)
     ("controller", Controller, "in", "called with t after [q, qd] were written to control_buffer (NULL: none)"),
     ("control_mode", _I, "in", "0: no controller; 1: called at every evaluation; 2: at the sample instants"),

@@ -132,6 +132,11 @@ class Solution:
     intervals : tuple of MethodInterval
         Which integrator ran where, when the solver changes integrators (else :func:`simulate`
         records one interval of its method).
+    turns : (n, 2 + 4 m) or None
+        Exact stiction: the sliding directions the compiled driver turned itself at kinematic dead points
+        (``kl_turn`` in ``c/cvode.c``), a row per joint turned: ``t``, the joint's index among those with
+        friction, ``[q, qd]`` before and after the projection there; the outputs after a turn were computed
+        with the turned directions (:mod:`.impacts` splits them into pieces).
     segments : tuple of Segment
         A run with events (limits, exact stiction): the model of each piece and its outputs
         (:class:`~.energy.Segment`); empty for a run of the problem's model throughout.
@@ -150,6 +155,7 @@ class Solution:
     parameters: np.ndarray | None = None
     intervals: tuple[MethodInterval, ...] = ()
     segments: tuple[Segment, ...] = ()
+    turns: np.ndarray | None = None
 
     #: The keys of :attr:`derived` (:func:`derived_shapes`).
     DERIVED: ClassVar[tuple[str, ...]] = tuple(derived_shapes(0, 0, 0, 0))

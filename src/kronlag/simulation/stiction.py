@@ -22,7 +22,9 @@ The rule at the start: a joint whose rate is within :data:`~kronlag.numeric.tole
 ``atol`` of zero is at rest and decided as a joint that has just stopped (all such joints held
 together: each sticks if its holding force is within ``r mu_s N``, else slides in that force's
 direction); any other slides in the direction of its rate.  Joints that stop at one instant are
-decided together in the same way.  A joint whose rate the holds make zero for every allowed motion is
+decided together in the same way, with every sliding joint whose rate the constraints tie to theirs
+(:func:`_stopped_with`).  Joints at kinematic dead points are turned inside the compiled run where it is
+sure of the decision (``kl_turn`` in ``c/cvode.c``, :meth:`.impacts._LimitRun._pieces`).  A joint whose rate the holds make zero for every allowed motion is
 *locked* to them (:data:`MODE_LOCKED`, no force of its own, no events) and its group is decided as a
 whole (:func:`_decide`); where that takes dividing the holding force among the group, a run refuses.  Each transition is a :class:`~.trajectory.StictionEvent` in
 ``trajectory.events``.
@@ -46,7 +48,7 @@ from ..model.friction import (
 from ..numeric.friction import friction_joints, friction_records, sticking_limit
 from ..core.errors import NumericalError
 from ..numeric.numeric_model import NumericModel
-from ..numeric.tolerances import AT_REST, TIED_RATIO, matrix_rank
+from ..numeric.tolerances import AT_REST, RATE_CHANGE_STEP, TIED_RATIO, matrix_rank
 from ..symbolic.derivation import derive
 from .controllers import ControlledModel
 from .trajectory import StictionEvent
@@ -151,7 +153,7 @@ def _rate_changes(model: NumericModel, t: float, y: np.ndarray, now: list[dict])
     m = model.m
     q, qd = y[:m], y[m:]
     qdd = model.forward_dynamics(q, qd, t).qdd
-    step = 1e-7 * max(1.0, abs(t))
+    step = RATE_CHANGE_STEP * max(1.0, abs(t))
     ahead = friction_records(model, t + step, q + step * qd, qd + step * qdd)
     return np.array([(float(a["J"] @ (qd + step * qdd)) - float(b["J"] @ qd)) / step for a, b in zip(ahead, now)])
 
@@ -239,6 +241,8 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
     for j in dead:  # kinematic dead points (the constraints alone zero the rate here): the rate passes zero
         new[j] = -modes[j]
     stopped = [j for j in stopped if j not in dead]
+    stopped += _stopped_with(base, rows, rates, modes, stopped, dead, rank_rtol, rest)
+    stopped.sort(key=lambda j: -_mobility(base, rows[j]))  # the holds: the freest joints first (_mobility)
     if stopped:  # held together, each group by its own hold (module docstring, and above)
         holds = [j for j, mode in enumerate(new) if mode == MODE_HELD]
         locked = [j for j, mode in enumerate(new) if mode == MODE_LOCKED]
@@ -279,6 +283,44 @@ def _decide(variant_of: Callable[[tuple[int, ...]], NumericModel], modes: tuple[
                               f"{threshold:.6g} but not surely the group's ({capacity:.6g} with the loads "
                               "without the others' friction)")
     return tuple(_consistent(variant_of, new, t, y, rest, names)), found
+
+
+def _mobility(base: np.ndarray, row: np.ndarray) -> float:
+    """The norm of ``row``'s part outside the row space of ``base``: how fast the joint's rate goes for a unit
+    allowed motion.  The joints that stop together are held in decreasing order of it, so that a locked
+    group's hold is its freest joint (rate ratios of the others at most about 1: the group's capacity read
+    with a good leverage), whichever of them the root finder flagged first (a joint near its own dead point
+    as the hold needs a holding force of the order of 1 / its rate, and the capacity read from it is as
+    far off)."""
+    if not len(base):
+        return float(np.linalg.norm(row))
+    coefficients = np.linalg.lstsq(base.T, row, rcond=None)[0]
+    return float(np.linalg.norm(row - base.T @ coefficients))
+
+
+def _stopped_with(base: np.ndarray, rows: list[np.ndarray], rates: list[float], modes: tuple[int, ...],
+                  stopped: list[int], dead: list[int], rank_rtol: float, rest: float) -> list[int]:
+    """The sliding joints (not in ``stopped`` or ``dead``) that the joints ``stopped`` and the holds stop too:
+    a joint whose row is a combination of the constraints' rows and theirs (``v = sum_k c_k v_k`` plus the
+    rate the constraints themselves impose, e.g. a drive's) has the rate ``v - sum_k c_k v_k`` when they stand
+    still, zero (within ``rest``) for a linkage without drives.  Such a joint stops with them, whatever its
+    own residual rate ``v`` (of the order of theirs, ``c_k`` times the root's rounding, on either side of the
+    at-rest limit): it is decided with them (held or locked), not left sliding at a rate zero by the
+    constraints, which made the decision hang on the last bits of ``v``."""
+    anchors = [j for j, mode in enumerate(modes) if mode == MODE_HELD] + stopped
+    if not stopped:
+        return []
+    found = []
+    for i, mode in enumerate(modes):
+        if mode not in (1, -1) or i in stopped or i in dead:
+            continue
+        held_rows = np.vstack([base, *[rows[k][None, :] for k in anchors]])
+        if not _dependent(held_rows, rows[i], rank_rtol):
+            continue
+        ratios = _ratios(base, [rows[k] for k in anchors], rows[i])
+        if abs(rates[i] - sum(c * rates[k] for c, k in zip(ratios, anchors))) <= rest:
+            found.append(i)
+    return found
 
 
 def _slides_as_whole(variant_of: Callable[[tuple[int, ...]], NumericModel], trial: tuple[int, ...], hold: int,

@@ -44,6 +44,10 @@ class LimitWatch:
     friction : int
         The joints with friction, each watched after the contacts (exact stiction,
         :func:`~kronlag.numeric.friction.stiction_values`; 1 for a joint with the smooth law).
+    at_rest : float
+        Exact stiction: a sliding joint's rate within this is at rest; above 0, the compiled driver may
+        turn a sliding direction itself at a kinematic dead point (``kl_turn`` in ``c/cvode.c``; the
+        solution's ``turns``), 0: every event ends the segment.
     """
 
     kernels: LimitKernels
@@ -52,6 +56,7 @@ class LimitWatch:
     first_step: float = 0.0
     parameters: np.ndarray | None = None
     friction: int = 0
+    at_rest: float = 0.0
 
     @property
     def size(self) -> int:

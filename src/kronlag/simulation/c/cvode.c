@@ -98,7 +98,7 @@ extern int CVodeSetRootDirection(void *mem, int *rootdir);
 extern int CVodeGetRootInfo(void *mem, int *rootsfound);
 
 enum { KL_M = KRONLAG_M, KL_R = KRONLAG_R, KL_S = KRONLAG_S, KL_N = 2 * KRONLAG_M,
-       KL_K = KRONLAG_R + KRONLAG_S, KL_TERMS_ = KRONLAG_DYNAMICS_SIZE };
+       KL_K = KRONLAG_R + KRONLAG_S, KL_TERMS_ = KRONLAG_DYNAMICS_SIZE, KL_NF = KRONLAG_STICTION_WATCHED };
 enum { CV_ADAMS = 1, CV_ONE_STEP = 2, CV_TOO_MUCH_WORK = -1, CV_ROOT_RETURN = 2 };
 enum { KL_PHI = KRONLAG_DYNAMICS_PHI, KL_PHI_Q = KRONLAG_DYNAMICS_PHI_Q, KL_PHI_T = KRONLAG_DYNAMICS_PHI_T,
        KL_A = KRONLAG_DYNAMICS_A, KL_B = KRONLAG_DYNAMICS_B };
@@ -114,6 +114,7 @@ typedef struct {
     double t_singular, y_singular[KL_N];  /* ... there */
     const kronlag_options *o;          /* for the limits (limits.c) and the controller (controller.c) */
     int stopped;                       /* the controller's code to end the run with (0: none) */
+    double turned[KL_NF + 1];          /* exact stiction: -1 where kl_turn turned a sliding direction, else 1 */
 } kl_data;
 
 /* The right-hand side [qd, qdd] of the Baumgarte ODE at (t, x = [q, qd]) into dx (shared with
@@ -125,8 +126,8 @@ static int kl_index1_rhs(kl_data *data, double t, const double *x, double *dx)
     memcpy(dx, x + KL_M, KL_M * sizeof(double));
     int stop = kl_control_evaluate(data->o, t, x, x + KL_M);
     if (stop) { data->stopped = stop; return -1; }
-    if (!kronlag_forward_dynamics_ranked(t, x, x + KL_M, data->p, data->alpha, data->beta, data->generic_rank,
-                                         dx + KL_M, lam, mu)) return 0;
+    if (!kronlag_forward_dynamics_turned(t, x, x + KL_M, data->p, data->alpha, data->beta, data->generic_rank,
+                                         KL_NF ? data->turned : NULL, dx + KL_M, lam, mu)) return 0;
     /* A singular configuration is unrecoverable: remember where, for the message. */
     data->singular = 1;
     data->t_singular = t;
@@ -146,10 +147,12 @@ static int kl_roots(sunrealtype t, N_Vector y, sunrealtype *gout, void *user_dat
     kl_data *data = user_data;
     const double *x = N_VGetArrayPointer(y);
     double qdd[KL_M + 1], lam[KL_R + 1], mu[KL_S + 1];
-    if (data->o->n_contacts > 0 && kronlag_forward_dynamics(t, x, x + KL_M, data->p, 0.0, 0.0, qdd, lam, mu)) return -1;
+    if (data->o->n_contacts > 0 && kronlag_forward_dynamics_turned(t, x, x + KL_M, data->p, 0.0, 0.0, KL_K,
+                                                                   KL_NF ? data->turned : NULL, qdd, lam, mu))
+        return -1;
     kl_limit_values(data->o, x, lam, gout);
 #if KRONLAG_STICTION_WATCHED > 0
-    if (kronlag_stiction_values(t, x, x + KL_M, data->p, data->o->n_contacts > 0 ? lam : NULL, mu,
+    if (kronlag_stiction_values(t, x, x + KL_M, data->p, data->turned, data->o->n_contacts > 0 ? lam : NULL, mu,
                                 gout + data->o->n_gaps + data->o->n_contacts)) return -1;
 #endif
     return 0;
@@ -237,7 +240,8 @@ static int kl_project(double t, double *x, const kl_data *data)
 static void kl_index1_start(kronlag_options *o, const double *p, kl_data *data, kl_monitor *monitor, double *terms,
                             double *B, double *c)
 {
-    *data = (kl_data){p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}, o, 0};
+    *data = (kl_data){p, o->alpha, o->beta, o->projection_tol, KL_K, 0, 0.0, {0.0}, o, 0, {0.0}};
+    for (int j = 0; j < KL_NF; ++j) data->turned[j] = 1.0;
     kl_constraints(o->t0, o->y0, p, terms, B, c);
     if (KL_K > 0) {
         double magnitudes[KL_K + 1];
@@ -289,15 +293,16 @@ const char *kronlag_cvode_flag_name(int flag)
     return CVodeGetReturnFlagName(flag);
 }
 
-/* Derived outputs at the first n output rows of o (y_out, t_out), from one evaluation of the
+/* Derived outputs at the output rows from..n-1 of o (y_out, t_out), from one evaluation of the
  * dynamics terms per row: qdd, lam, mu from the augmented solve without Baumgarte terms (NaN where
- * the configuration is singular), the kinetic energy T = 1/2 qd^T M qd, the potential energy, Phi
- * and [Phi_q qd + Phi_t; A qd + b] (M, Phi, Phi_q, Phi_t, A, b do not depend on qd). */
-static void kl_outputs(const kronlag_options *o, int n)
+ * the configuration is singular; the sliding directions turned by turned), the kinetic energy
+ * T = 1/2 qd^T M qd, the potential energy, Phi and [Phi_q qd + Phi_t; A qd + b] (M, Phi, Phi_q,
+ * Phi_t, A, b do not depend on qd). */
+static void kl_outputs(const kronlag_options *o, int from, int n, const double *turned)
 {
     double terms[KL_TERMS_ + 1], nu[KL_K + 1];
     const double *M = terms + KRONLAG_DYNAMICS_M;
-    for (int k = 0; k < n; ++k) {
+    for (int k = from; k < n; ++k) {
         const double *q = o->y_out + k * KL_N, *qd = q + KL_M, t = o->t_out[k];
         double *a = o->qdd + k * KL_M, *l = o->lam + k * KL_R, *u = o->mu + k * KL_S;
         /* under a controller, the parameters of the output (a continuous one is called there; an
@@ -309,7 +314,7 @@ static void kl_outputs(const kronlag_options *o, int n)
         const double *p = o->control_mode ? o->p_out + (long)k * o->n_parameters : o->p;
         int rank;
         kronlag_dynamics(t, q, qd, p, terms);
-        if (kronlag_solve_at(t, q, qd, p, terms, 0.0, 0.0, KL_K, a, nu, &rank)) {
+        if (kronlag_solve_turned(t, q, qd, p, terms, 0.0, 0.0, KL_K, KL_NF ? turned : NULL, a, nu, &rank)) {
             for (int i = 0; i < KL_M; ++i) a[i] = NAN;
             for (int i = 0; i < KL_K; ++i) nu[i] = NAN;
         }
@@ -329,6 +334,76 @@ static void kl_outputs(const kronlag_options *o, int n)
         }
     }
 }
+
+#if KRONLAG_STICTION_WATCHED > 0
+/* Exact stiction inside the run (kronlag.simulation.stiction decides every other event): at a root
+ * (t, x), the joints whose watched functions fell (o->roots) turn their sliding direction here when each
+ * is at a kinematic dead point -- its row J_rate a combination of the constraints' rows [Phi_q; A], so
+ * that its rate is zero for every allowed motion and passes through zero: the decision of
+ * stiction._decide for such a joint -- and nothing else asks for a decision: no limit's or contact's
+ * function fell, no joint is held or locked, no other sliding joint is at rest (rate within o->at_rest),
+ * no controller; and after the turn each turned joint's rate grows in its new direction (its change over
+ * a short step along the motion, as stiction._rate_changes).  Dependence only where the rank policy is
+ * sure of it: the part of J_rate outside the row space at most KRONLAG_TURN_RTOL times KRONLAG_RANK_RTOL
+ * times the largest row's norm (it bounds the smallest singular value of [G; J_rate]); anywhere less
+ * clear, the segment ends and Python decides.  Returns 1 with the new directions in turned, else 0. */
+static int kl_turn(const kronlag_options *o, const kl_data *data, double t, const double *x, double *turned)
+{
+    enum { m = KL_M, nf = KL_NF, size = KRONLAG_FRICTION_RECORD };
+    int first = o->n_gaps + o->n_contacts, count = 0;
+    if (o->n_turns >= o->max_turns || o->control_mode != 0 || o->n_contacts > 0) return 0;
+    for (int i = 0; i < first; ++i)
+        if (o->roots[i] != 0.0) return 0;
+    double records[nf * size + 1], terms[KL_TERMS_ + 1], B[KL_K * KL_M + 1], c[KL_K + 1], largest = 0.0;
+    kronlag_friction_turned(t, x, x + m, data->p, data->turned, records);
+    kl_constraints(t, x, data->p, terms, B, c);
+    for (int i = 0; i < KL_K; ++i) {
+        double norm = 0.0;
+        for (int j = 0; j < m; ++j) norm += B[i * m + j] * B[i * m + j];
+        largest = fmax(largest, sqrt(norm));
+    }
+    memcpy(turned, data->turned, nf * sizeof(double));
+    for (int j = 0; j < nf; ++j) {
+        const double *J = records + j * size;
+        double mode = KRONLAG_FRICTION_FIELDS(J)[8], rate = 0.0;
+        if (mode == KRONLAG_MODE_HELD || mode == KRONLAG_MODE_LOCKED) return 0;
+        for (int i = 0; i < m; ++i) rate += J[i] * x[m + i];
+        if (o->roots[first + j] == 0.0) {
+            if ((mode == 1.0 || mode == -1.0) && fabs(rate) <= o->at_rest) return 0;
+            continue;
+        }
+        if (mode != 1.0 && mode != -1.0) return 0;
+        double outside[m], along[KL_K + 1], norm = 0.0;
+        memcpy(outside, J, sizeof outside);
+        for (int i = 0; i < KL_K; ++i) {
+            along[i] = 0.0;
+            for (int a = 0; a < m; ++a) along[i] += B[i * m + a] * J[a];
+        }
+        if (KL_K > 0) min_norm_correction(B, KL_K, m, along, outside);  /* J less its part in the row space */
+        for (int i = 0; i < m; ++i) norm += outside[i] * outside[i];
+        if (!(sqrt(norm) <= KRONLAG_TURN_RTOL * KRONLAG_RANK_RTOL * largest)) return 0;
+        turned[j] = -turned[j];
+        ++count;
+    }
+    if (count == 0) return 0;
+    double qdd[m + 1], lam[KL_R + 1], mu[KL_S + 1], ahead[2 * m], later[nf * size + 1];
+    if (kronlag_forward_dynamics_turned(t, x, x + m, data->p, 0.0, 0.0, KL_K, turned, qdd, lam, mu)) return 0;
+    double step = KRONLAG_RATE_CHANGE_STEP * fmax(1.0, fabs(t));
+    for (int i = 0; i < m; ++i) {
+        ahead[i] = x[i] + step * x[m + i];
+        ahead[m + i] = x[m + i] + step * qdd[i];
+    }
+    kronlag_friction_turned(t + step, ahead, ahead + m, data->p, turned, later);
+    for (int j = 0; j < nf; ++j) {
+        if (o->roots[first + j] == 0.0) continue;
+        const double *now = records + j * size, *next = later + j * size;
+        double change = 0.0;
+        for (int i = 0; i < m; ++i) change += next[i] * ahead[m + i] - now[i] * x[m + i];
+        if (!(-KRONLAG_FRICTION_FIELDS(now)[8] * change > 0.0)) return 0;  /* the new direction: -mode */
+    }
+    return 1;
+}
+#endif
 
 /* CVODE's counters, kept over its restarts at sample instants (CVodeReInit sets them to zero). */
 typedef struct { long steps, nfev, lin_rhs, njev; } kl_cvode_counters;
@@ -377,6 +452,8 @@ int kronlag_cvode(kronlag_options *o)
     if (major != 7) return KL_VERSION_MISMATCH;
     int n_eval = o->n_eval;
     kl_data data;
+    int derived = 0;  /* the rows whose derived outputs are written (kl_outputs), before a turn */
+    o->n_turns = 0;
     double t_sample = kl_control_next_sample(o);  /* INFINITY without a sampled controller */
     kl_cvode_counters counted = {0, 0, 0, 0};
     SUNContext ctx = NULL;
@@ -459,6 +536,34 @@ int kronlag_cvode(kronlag_options *o)
         if (t >= t_sample && t < t1 && (flag = kl_cvode_sample(o, mem, y, t, &t_sample, &counted))) break;
         if (n_eval == 0 && rows == o->max_rows) { flag = KRONLAG_RESULT_OUTPUTS_FULL; break; }
         if ((flag = kl_outputs_at(o, &data, t, x, &rows, &next, terms, B, c, at_x))) break;
+#if KRONLAG_STICTION_WATCHED > 0
+        double turned[KL_NF + 1];
+        if (rooted && kl_turn(o, &data, t, x, turned)) {  /* dead points: the run goes on with the new directions */
+            kl_outputs(o, derived, rows, data.turned);
+            derived = rows;
+            memcpy(data.turned, turned, KL_NF * sizeof(double));
+            double before[KL_N];
+            memcpy(before, x, sizeof before);
+            if (kl_project(t, x, &data)) { flag = KRONLAG_RESULT_PROJECTION_FAILED; break; }
+            for (int j = 0; j < KL_NF; ++j) {
+                if (o->roots[o->n_gaps + o->n_contacts + j] == 0.0 || o->n_turns >= o->max_turns) continue;
+                double *row = o->turns + (long)o->n_turns++ * (2 + 2 * KL_N);
+                row[0] = t;
+                row[1] = j;
+                memcpy(row + 2, before, KL_N * sizeof(double));
+                memcpy(row + 2 + KL_N, x, KL_N * sizeof(double));
+            }
+            kl_cvode_count(mem, &counted);
+            if (CVodeReInit(mem, t, y)) { flag = KRONLAG_RESULT_SOLVER_FAILED; break; }
+            if (n_eval == 0) {  /* the state at t again, the first output of the new directions */
+                if (rows == o->max_rows) { flag = KRONLAG_RESULT_OUTPUTS_FULL; break; }
+                o->t_out[rows] = t;
+                memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
+                ++rows;
+            }
+            continue;
+        }
+#endif
         if (rooted) { flag = KRONLAG_RESULT_LIMIT; break; }  /* limits: CVODE stopped at the root, t and x are there */
         int stop = kl_progress_report(o, &progress, t);
         if (stop) { flag = stop; break; }
@@ -475,7 +580,7 @@ int kronlag_cvode(kronlag_options *o)
         memcpy(y_end, data.y_singular, KL_N * sizeof(double));
     }
 done:
-    kl_outputs(o, rows);
+    kl_outputs(o, derived, rows, data.turned);
     o->n_out = rows;
     o->n_events = monitor.count;
     o->t_end = t;

@@ -257,7 +257,7 @@ int kronlag_dop853(kronlag_options *o)
         memcpy(o->y_end, data.y_singular, KL_N * sizeof(double));
     }
 done:
-    kl_outputs(o, rows);
+    kl_outputs(o, 0, rows, data.turned);
     o->n_out = rows;
     o->n_events = monitor.count;
     o->t_end = t;

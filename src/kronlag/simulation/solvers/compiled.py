@@ -19,6 +19,10 @@ if TYPE_CHECKING:
 
 __all__ = ["CompiledSolver", "compiled_solution", "cvode_segment"]
 
+#: Exact stiction: the rows of directions a segment's driver may turn itself (a row per joint and instant);
+#: past them, every event ends the segment (Python decides it).
+_MAX_TURNS = 1000
+
 
 class CompiledSolver(Solver):
     """The Baumgarte index-1 ODE integrated entirely in compiled code, outputs projected.
@@ -72,7 +76,8 @@ class CompiledSolver(Solver):
 
     def solve(self, problem: MultibodyProblem) -> Solution:
         require(self, problem.model)
-        return compiled_solution(problem, cvode_segment(problem, self.options, problem.t0, problem.y0), "cvode")
+        return compiled_solution(problem, cvode_segment(problem, self.options, problem.t0, problem.y0, turns=True),
+                                 "cvode")
 
 
 def compiled_solution(problem: MultibodyProblem, segment: Segment, kind: str) -> Solution:
@@ -84,10 +89,18 @@ def compiled_solution(problem: MultibodyProblem, segment: Segment, kind: str) ->
     return solution_of([segment], *segment_status(segment, problem.model, kind))
 
 
-def cvode_segment(problem: MultibodyProblem, options: SolverOptions, t0: float, y0: np.ndarray) -> Segment:
+def cvode_segment(problem: MultibodyProblem, options: SolverOptions, t0: float, y0: np.ndarray, *,
+                  turns: bool = False) -> Segment:
     """CVODE (Adams) on the Baumgarte ODE from ``(t0, y0)`` until ``t1`` or the approach to a
-    singular configuration (:attr:`Result.APPROACH`)."""
+    singular configuration (:attr:`Result.APPROACH`); ``turns``: exact stiction's directions may be turned
+    inside the run where the watch allows (:attr:`~..watch.LimitWatch.at_rest`; the caller passes the
+    segment's ``turns`` on in its solution)."""
+    watch = problem.watch
+    if turns and watch is not None and watch.friction and watch.at_rest > 0:
+        extra = {"max_turns": _MAX_TURNS, "at_rest": watch.at_rest}
+    else:
+        extra = {}
     scaled = options.scaled(CompiledSolver.TOLERANCE_SCALE, CVODE_TIGHTEST)
     # the outputs' projection no tighter than the floor either: |Phi| cannot be made smaller than rounding
     return run("cvode", problem, scaled, t0, y0, projection_tol=max(scaled.projection_tol, CVODE_TIGHTEST[1]),
-               alpha=problem.alpha, beta=problem.beta)
+               alpha=problem.alpha, beta=problem.beta, **extra)

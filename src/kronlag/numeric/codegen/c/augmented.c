@@ -93,8 +93,9 @@ static int kronlag_solve_many(const double *terms, const double *qd, double alph
 }
 
 #ifdef KRONLAG_FRICTION
-int kronlag_forward_dynamics(double t, const double *q, const double *qd, const double *p,
-                             double alpha, double beta, double *qdd, double *lam, double *mu);
+int kronlag_forward_dynamics_turned(double t, const double *q, const double *qd, const double *p, double alpha,
+                                    double beta, int max_rank, const double *turned, double *qdd, double *lam,
+                                    double *mu);
 
 /* Joint friction: kronlag.numeric.friction is the reference of this code (the same records, from the
  * kernel kronlag_friction, and the same steps). |v - (v.u) u| for 3-vectors. */
@@ -124,6 +125,19 @@ static void kronlag_friction_wrench(const double *record, const double *lam, dou
  * 4 locked to a held joint). */
 #define KRONLAG_FRICTION_FIELDS(record) ((record) + KRONLAG_M + 48)
 enum { KRONLAG_MODE_SMOOTH = 0, KRONLAG_MODE_SIGN = 2, KRONLAG_MODE_HELD = 3, KRONLAG_MODE_LOCKED = 4 };
+
+/* The records of kronlag_friction at (t, q, qd) with the direction of a joint sliding (mode +-1) turned
+ * where turned[j] < 0 (any other value: as compiled): the directions a compiled run turned at kinematic
+ * dead points (cvode.c), without a model per set of directions; turned NULL: all as compiled. */
+static void kronlag_friction_turned(double t, const double *q, const double *qd, const double *p,
+                                    const double *turned, double *records)
+{
+    kronlag_friction(t, q, qd, p, records);
+    for (int j = 0; turned && j < KRONLAG_FRICTION; ++j) {
+        double *c = KRONLAG_FRICTION_FIELDS(records + j * KRONLAG_FRICTION_RECORD);
+        if ((c[8] == 1.0 || c[8] == -1.0) && turned[j] < 0.0) c[8] = -c[8];
+    }
+}
 
 /* The law's sign(v) by the record's mode. */
 static double kronlag_friction_direction(const double *c, double rate)
@@ -188,13 +202,14 @@ static int kronlag_small_solve(double *A, double *b, int n)
  * Returns 0, 1 (singular) or 2 (the friction forces did not converge). */
 
 static int kronlag_friction_solve(double t, const double *q, const double *qd, const double *p, const double *terms,
-                                  double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
+                                  double alpha, double beta, int max_rank, const double *turned, double *qdd,
+                                  double *nu, int *rank)
 {
     enum { m = KRONLAG_M, k = KRONLAG_K, nf = KRONLAG_FRICTION, size = KRONLAG_FRICTION_RECORD };
     double records[nf * size + 1], forcing[nf * m], accelerations[(nf + 1) * m], multipliers[(nf + 1) * (k + 1)];
     double rates[nf], forces[nf], factor[nf], viscous[nf];
     int active[nf], na = 0;  /* the joints whose force can be nonzero: the unknowns */
-    kronlag_friction(t, q, qd, p, records);
+    kronlag_friction_turned(t, q, qd, p, turned, records);
     for (int j = 0; j < nf; ++j) {
         const double *record = records + j * size;
         rates[j] = 0.0;
@@ -302,18 +317,19 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
  * held one (f = nu[hold_row], nu = [lam; mu] from the forward dynamics without Baumgarte terms), 1
  * otherwise (stiction_values in kronlag.numeric.friction).  lam and mu: the multipliers at the state,
  * or NULL: then solved here only when a joint is held (sliding ones need the rates alone, and the
- * root function is called at every step).  Returns 0, or the forward dynamics' failure. */
-static int kronlag_stiction_values(double t, const double *q, const double *qd, const double *p, const double *lam,
-                                   const double *mu, double *out)
+ * root function is called at every step); turned: as for kronlag_friction_turned.  Returns 0, or the
+ * forward dynamics' failure. */
+static int kronlag_stiction_values(double t, const double *q, const double *qd, const double *p, const double *turned,
+                                   const double *lam, const double *mu, double *out)
 {
     enum { m = KRONLAG_M, r = KRONLAG_R, s = KRONLAG_S, k = KRONLAG_K, nf = KRONLAG_FRICTION,
            size = KRONLAG_FRICTION_RECORD };
     double records[nf * size + 1], nu[k + 1], wrench[6], own_lam[r + 1], own_mu[s + 1], qdd[m + 1];
-    kronlag_friction(t, q, qd, p, records);
+    kronlag_friction_turned(t, q, qd, p, turned, records);
     int held = 0;
     for (int j = 0; j < nf; ++j) held |= (int)KRONLAG_FRICTION_FIELDS(records + j * size)[8] == KRONLAG_MODE_HELD;
     if (held && !lam) {
-        int status = kronlag_forward_dynamics(t, q, qd, p, 0.0, 0.0, qdd, own_lam, own_mu);
+        int status = kronlag_forward_dynamics_turned(t, q, qd, p, 0.0, 0.0, k, turned, qdd, own_lam, own_mu);
         if (status) return status;
         lam = own_lam;
         mu = own_mu;
@@ -339,30 +355,48 @@ static int kronlag_stiction_values(double t, const double *q, const double *qd, 
 #define KRONLAG_STICTION_WATCHED 0
 #endif
 
-/* The solve at a state: with the joints' friction when the model has any. */
-static int kronlag_solve_at(double t, const double *q, const double *qd, const double *p, const double *terms,
-                            double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
+/* The solve at a state: with the joints' friction when the model has any (their sliding directions
+ * turned by turned, NULL: as compiled; kronlag_friction_turned). */
+static int kronlag_solve_turned(double t, const double *q, const double *qd, const double *p, const double *terms,
+                                double alpha, double beta, int max_rank, const double *turned, double *qdd, double *nu,
+                                int *rank)
 {
 #ifdef KRONLAG_FRICTION
-    return kronlag_friction_solve(t, q, qd, p, terms, alpha, beta, max_rank, qdd, nu, rank);
+    return kronlag_friction_solve(t, q, qd, p, terms, alpha, beta, max_rank, turned, qdd, nu, rank);
 #else
-    (void)t; (void)q; (void)p;
+    (void)t; (void)q; (void)p; (void)turned;
     return kronlag_solve_many(terms, qd, alpha, beta, max_rank, 1, NULL, qdd, nu, rank);
 #endif
 }
 
+/* The solve at a state with the directions as compiled. */
+static int kronlag_solve_at(double t, const double *q, const double *qd, const double *p, const double *terms,
+                            double alpha, double beta, int max_rank, double *qdd, double *nu, int *rank)
+{
+    return kronlag_solve_turned(t, q, qd, p, terms, alpha, beta, max_rank, NULL, qdd, nu, rank);
+}
+
 /* Forward dynamics with multipliers (Baumgarte alpha, beta), at most max_rank independent rows of
- * [Phi_q; A] (KRONLAG_K: the numerical rank alone decides); 0 on success, 1 if singular. */
-int kronlag_forward_dynamics_ranked(double t, const double *q, const double *qd, const double *p,
-                                    double alpha, double beta, int max_rank, double *qdd, double *lam, double *mu)
+ * [Phi_q; A] (KRONLAG_K: the numerical rank alone decides), the sliding directions turned by turned
+ * (kronlag_friction_turned); 0 on success, 1 if singular. */
+int kronlag_forward_dynamics_turned(double t, const double *q, const double *qd, const double *p, double alpha,
+                                    double beta, int max_rank, const double *turned, double *qdd, double *lam,
+                                    double *mu)
 {
     double terms[KRONLAG_DYNAMICS_SIZE + 1], nu[KRONLAG_K + 1];
     int rank;
     kronlag_dynamics(t, q, qd, p, terms);
-    int status = kronlag_solve_at(t, q, qd, p, terms, alpha, beta, max_rank, qdd, nu, &rank);
+    int status = kronlag_solve_turned(t, q, qd, p, terms, alpha, beta, max_rank, turned, qdd, nu, &rank);
     for (int j = 0; j < KRONLAG_R; ++j) lam[j] = nu[j];
     for (int j = 0; j < KRONLAG_S; ++j) mu[j] = nu[KRONLAG_R + j];
     return status;
+}
+
+/* kronlag_forward_dynamics_turned with the directions as compiled. */
+int kronlag_forward_dynamics_ranked(double t, const double *q, const double *qd, const double *p,
+                                    double alpha, double beta, int max_rank, double *qdd, double *lam, double *mu)
+{
+    return kronlag_forward_dynamics_turned(t, q, qd, p, alpha, beta, max_rank, NULL, qdd, lam, mu);
 }
 
 /* Forward dynamics with multipliers (Baumgarte alpha, beta); 0 on success, 1 if singular. */
