@@ -26,7 +26,7 @@ def test_large_kernels_keep_temporaries_used_in_one_function_local(chain, monkey
     eom, _ = chain
     source = codegen.KernelSource(eom)
     monkeypatch.setattr(kernels, "LINEAR_CSE_OUTPUTS", 0)  # this small kernel printed as a large one
-    monkeypatch.setattr(c_backend, "C_CHUNK", 400)  # in many functions: some temporaries cross them
+    monkeypatch.setattr(c_backend, "C_LOCAL_CHUNK", 400)  # in many functions: some temporaries cross them
     kernel = source.kernel("dynamics")
     text, chunks = codegen.c_kernel(kernel, 1)
     assert chunks > 3
@@ -53,7 +53,7 @@ def test_a_kernel_with_local_temporaries_computes_the_accelerations(chain, tmp_p
     eom, values = chain
     reference = eom.numeric(values, backend="python")
     monkeypatch.setattr(kernels, "LINEAR_CSE_OUTPUTS", 0)
-    monkeypatch.setattr(c_backend, "C_CHUNK", 400)
+    monkeypatch.setattr(c_backend, "C_LOCAL_CHUNK", 400)
     model = eom.numeric(values, backend="c")
     assert re.search(r"const double x\d+ = ", model.c_source)
     rng = np.random.default_rng(7)
