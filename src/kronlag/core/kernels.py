@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import math
+import operator
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -313,11 +314,10 @@ def _rebuilt(expr: se.Basic, args: Sequence[se.Basic]) -> se.Basic:
     return (getattr(expr, "func", None) or type(expr))(*args)
 
 
-def _operands(node: se.Basic) -> tuple[tuple[se.Basic, ...], bool]:
-    """The operands :func:`linear_cse` sees in ``node``, and whether they are not its own arguments:
-    a product ``c*a*b*...`` with a number ``c`` is ``c`` times the product ``a*b*...``, which is then
-    shared with the same product elsewhere (``(1/2)*m*l*s`` beside ``m*l*s``)."""
-    args = node.args
+def _operands(node: se.Basic, args: tuple[se.Basic, ...]) -> tuple[tuple[se.Basic, ...], bool]:
+    """The operands :func:`linear_cse` sees in ``node`` (of arguments ``args``), and whether they are
+    not its own arguments: a product ``c*a*b*...`` with a number ``c`` is ``c`` times the product
+    ``a*b*...``, which is then shared with the same product elsewhere (``(1/2)*m*l*s`` beside ``m*l*s``)."""
     if isinstance(node, se.Mul) and len(args) > 2:
         numbers = [arg for arg in args if arg.is_Number]
         if len(numbers) == 1:
@@ -335,17 +335,22 @@ def linear_cse(exprs: Sequence[se.Basic]) -> tuple[list[tuple[se.Symbol, se.Basi
     ``(temporaries, outputs)`` as ``symengine.cse``: ``(symbol, expression)`` pairs in evaluation
     order (each uses only earlier ones) and ``exprs`` in terms of them.
     """
+    # ``.args`` builds new Python objects each time: read once per distinct node, atoms (no
+    # arguments) remembered with 0 uses
     uses: dict[se.Basic, int] = {}
     operands: dict[se.Basic, tuple[tuple[se.Basic, ...], bool]] = {}
     stack = list(exprs)
     while stack:
         node = stack.pop()
-        if not node.args:
+        seen = uses.get(node)
+        if seen is not None:
+            if seen:
+                uses[node] = seen + 1
             continue
-        seen = uses.get(node, 0)
-        uses[node] = seen + 1
-        if not seen:
-            operands[node] = _operands(node)
+        args = node.args
+        uses[node] = 1 if args else 0
+        if args:
+            operands[node] = _operands(node, args)
             stack.extend(operands[node][0])
     replaced: dict[se.Basic, se.Basic] = {}
     temporaries: list[tuple[se.Symbol, se.Basic]] = []
@@ -353,17 +358,17 @@ def linear_cse(exprs: Sequence[se.Basic]) -> tuple[list[tuple[se.Symbol, se.Basi
         pending = [(root, False)]
         while pending:  # depth first, each node after its operands
             node, ready = pending.pop()
-            if not node.args or node in replaced:
+            if node in replaced or node not in operands:  # done, or an atom
                 continue
             children, factored = operands[node]
             if not ready:
                 pending.append((node, True))
-                pending.extend((child, False) for child in children if child.args and child not in replaced)
+                pending.extend((child, False) for child in children if child in operands and child not in replaced)
                 continue
             args = [replaced.get(child, child) for child in children]
             if factored:
                 value = se.Mul(*args)
-            elif all(new is old for new, old in zip(args, children)):
+            elif not any(map(operator.is_not, args, children)):  # in C: no generator frames
                 value = node
             else:
                 value = _rebuilt(node, args)
