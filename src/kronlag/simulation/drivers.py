@@ -118,14 +118,15 @@ class Driver:
     tables: Callable[[], str] | None = None
 
 
-#: The integrators of the Baumgarte ODE: one library (the default method's, built with the model).
-_INDEX1 = dict(files=("cvode.c", "dop853.c"), kernels=("potential_energy", "Phi_q"), sundials=True,
-               tables=c_coefficients)
+#: The integrators of the Baumgarte ODE, one library (the default method's, built with the model):
+#: CVODE's driver and DOP853's, which reads the coefficients and the functions of ``cvode.c``.
+_INDEX1_FILES, _INDEX1_KERNELS = ("cvode.c", "dop853.c"), ("potential_energy", "Phi_q")
 
 #: The compiled integrators by name.
 DRIVERS = {
-    "cvode": Driver(entry="kronlag_cvode", label="CVODE", flag_names="kronlag_cvode_flag_name", **_INDEX1),
-    "dop853": Driver(entry="kronlag_dop853", label="DOP853", **_INDEX1),
+    "cvode": Driver(_INDEX1_FILES, "kronlag_cvode", _INDEX1_KERNELS, "CVODE", sundials=True,
+                    flag_names="kronlag_cvode_flag_name", tables=c_coefficients),
+    "dop853": Driver(_INDEX1_FILES, "kronlag_dop853", _INDEX1_KERNELS, "DOP853", sundials=True, tables=c_coefficients),
     "index3": Driver(("index3.c",), "kronlag_index3", ("tangent", "potential_energy"), "ALI3-P"),
 }
 
