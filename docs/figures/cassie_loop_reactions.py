@@ -1,0 +1,183 @@
+"""Cassie's leg loops from its SDF file: the named loop reactions over time (docs/sdf.md).
+
+example-robot-data's ``cassie_v2.sdf`` is read by :func:`kronlag.load_sdf` with its pelvis bolted to
+the world (a ``fixed`` joint from ``world`` to ``pelvis`` added to the file's text, SDFormat's way of
+fixing a model): Cassie on a stand, legs hanging.  The five joints per leg the file names ``-op``
+(its motors) are held at the file's pose by drives (their multipliers are the motor torques), and
+the knee and heel leaf springs act with the file's ``<spring_stiffness>`` (the reader keeps joint
+springs out of the dynamics, so they are added here as potentials).  Released at rest from the
+file's pose, springs undeflected, each leg drops onto its springs and oscillates about its static
+deflection; the loops' multipliers, named by the reader after the loop-closing joints
+(``left-pitch-rod-joint.x`` ...: the force on the joint's parent link, the Achilles or plantar rod,
+in newtons, components in the frame of the loop's nearest common ancestor link), are plotted.
+
+The right foot's loop is planar only to about 7e-8 rad in the file, so its out-of-plane row
+``right-plantar-foot-joint.z`` depends on the others (``kronlag check`` lists it): it is dropped, as
+the reader drops the left foot's identically zero one, so that every multiplier is unique.
+
+Run: ``python docs/figures/cassie_loop_reactions.py [out.png]`` (needs example-robot-data; about
+2 minutes: load ~10 s, derive ~10 s, C build ~1 min, simulation a few seconds).  It writes
+``docs/images/cassie_loop_reactions.png`` by default.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import kronlag
+
+#: Where example-robot-data installs Cassie's SDF file, inside its distribution.
+CASSIE = "cmeel.prefix/share/example-robot-data/robots/cassie_description/robots/cassie_v2.sdf"
+#: The joints the file names ``-op``, per leg: the motors, held at the file's pose.
+MOTORS = ("roll-op", "yaw-op", "pitch-op", "knee-op", "foot-op")
+#: The leaf springs of the file (``<spring_stiffness>``, N m/rad, ``<spring_reference>`` 0), per leg.
+SPRINGS = {"knee-shin-joint": 1500.0, "tarsus-spring-joint": 1250.0}
+#: The loops, per leg: the joints that close them (the Achilles rod at the hip, the plantar rod at the foot).
+LOOPS = {"pitch-rod-joint": "Achilles rod", "plantar-foot-joint": "plantar rod"}
+#: The row of the right foot's loop that depends on the others (planar to ~7e-8 rad).
+DEPENDENT_ROW = "right-plantar-foot-joint.z"
+#: SDFormat's fixed joint from the world: the pelvis on a stand.
+STAND = '<joint name="stand" type="fixed"><parent>world</parent><child>pelvis</child></joint>\n'
+DURATION = 0.3  # s
+SIDES = ("left", "right")
+
+
+def cassie_file() -> Path | None:
+    """The path of example-robot-data's ``cassie_v2.sdf``, or ``None`` if it is not installed."""
+    try:
+        path = Path(str(importlib.metadata.distribution("example-robot-data").locate_file(CASSIE)))
+    except importlib.metadata.PackageNotFoundError:
+        return None
+    return path if path.is_file() else None
+
+
+def cassie_on_stand(path: Path) -> kronlag.System:
+    """Cassie from ``path`` with its pelvis fixed to the world, its motors held by drives (named after
+    the joints) and its leaf springs as potentials (named ``"<joint> spring"``); the dependent row of
+    the right foot's loop removed."""
+    text = path.read_text()
+    end = text.index("</model>")
+    with tempfile.TemporaryDirectory() as folder:
+        on_stand = Path(folder) / path.name
+        on_stand.write_text(text[:end] + STAND + text[end:])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", kronlag.model.robot_formats.RobotFileWarning)  # meshes, skipped tags
+            system = kronlag.load_sdf(on_stand)
+    coordinates = {joint.name: joint.coordinate for joint in system.robot.joints}
+    by_name = {q.name: q for q in system.coordinates}
+    for side in SIDES:
+        for motor in MOTORS:
+            system.add_drive(coordinates[f"{side}-{motor}"], 0, name=f"{side}-{motor}")
+        for spring, stiffness in SPRINGS.items():
+            angle = by_name[coordinates[f"{side}-{spring}"]]
+            system.add_potential(stiffness * angle ** 2 / 2, name=f"{side}-{spring} spring")
+    system.constraints[:] = [row for row in system.constraints if row.name != DEPENDENT_ROW]
+    return system
+
+
+def loop_rows(system: kronlag.System) -> dict[str, list[str]]:
+    """The multipliers' names of each loop-closing joint (``"left-pitch-rod-joint"``: ``[".x", ...]``
+    in full), in the order of :data:`SIDES` and :data:`LOOPS`."""
+    names = [row.name for row in system.constraints]
+    return {f"{side}-{loop}": [name for name in names if name.startswith(f"{side}-{loop}.")]
+            for side in SIDES for loop in LOOPS}
+
+
+def static_equilibrium(model: kronlag.NumericModel, system: kronlag.System, *, tol: float = 1e-10,
+                       max_iterations: int = 30) -> tuple[np.ndarray, kronlag.ForwardDynamicsResult]:
+    """The legs at rest on their springs: ``(q, forward dynamics at (q, 0))`` with every acceleration
+    below ``tol``.  Each leg has one free mode (motors held); the knee springs' angles are found by the
+    secant method on their accelerations at rest, the other coordinates assembled around them."""
+    springs = [next(joint.coordinate for joint in system.robot.joints if joint.name == f"{side}-knee-shin-joint")
+               for side in SIDES]
+    index = [[x.name for x in system.coordinates].index(name) for name in springs]
+    guess, at_rest = np.zeros(model.m), np.zeros(model.m)
+
+    def accelerations(angles: np.ndarray) -> tuple[np.ndarray, kronlag.ForwardDynamicsResult]:
+        q, _ = model.assemble(guess, fixed=dict(zip(springs, angles)))
+        return q, model.forward_dynamics(q, at_rest)
+
+    previous, (q, result) = np.zeros(len(SIDES)), accelerations(np.zeros(len(SIDES)))
+    angles = np.full(len(SIDES), -0.01)  # rad: a first step, the way the legs sag
+    for _ in range(max_iterations):
+        last = result.qdd[index]
+        guess = q
+        q, result = accelerations(angles)
+        if np.max(np.abs(result.qdd)) < tol:
+            return q, result
+        # the legs are independent (the pelvis is held): a secant step for each
+        previous, angles = angles, angles - result.qdd[index] * (angles - previous) / (result.qdd[index] - last)
+    raise kronlag.EquilibriumError(f"Cassie's legs found no rest on their springs in {max_iterations} steps: "
+                                   f"max |qdd| = {np.max(np.abs(result.qdd)):.3g}", float(np.max(np.abs(result.qdd))))
+
+
+def plot(t: np.ndarray, multipliers: dict[str, np.ndarray], system: kronlag.System, path: Path, *,
+         at_rest: dict[str, float]) -> None:
+    """A panel per loop (rows: the Achilles and plantar rods, columns: left and right leg): each named
+    multiplier (``multipliers[name]`` over ``t``) and the force's magnitude, dotted their values at rest."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    frames = {loop.joint: loop.frame for loop in system.robot.loops}
+    figure, grid = plt.subplots(len(LOOPS), len(SIDES), figsize=(12, 7.5), sharex=True, layout="constrained")
+    for (joint, rows), axes in zip(loop_rows(system).items(), grid.T.ravel()):
+        values = np.column_stack([multipliers[row] for row in rows])
+        for row, column in zip(rows, values.T):
+            line, = axes.plot(t, column, label=row)
+            axes.axhline(at_rest[row], color=line.get_color(), linestyle=":", linewidth=1)
+        axes.plot(t, np.linalg.norm(values, axis=1), "k--", label="|F|")
+        side, loop = joint.split("-", 1)
+        axes.set_title(f"{joint}: force on the {side} {LOOPS[loop]}, {frames[joint]} frame", fontsize=10)
+        axes.set_ylabel("force [N]")
+        axes.grid(alpha=0.3)
+        axes.legend(fontsize=8, loc="upper right", ncols=2)
+    for axes in grid[-1]:
+        axes.set_xlabel("time [s]")
+    figure.suptitle("Cassie (cassie_v2.sdf) hanging from its pelvis, motors held, leaf springs from the file, "
+                    "released at rest:\nthe loop reactions, named after the loop-closing joints "
+                    "(dotted: their values with the legs at rest on their springs)")
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def main(out: Path) -> kronlag.Trajectory:
+    path = cassie_file()
+    if path is None:
+        sys.exit("example-robot-data is not installed (pip install example-robot-data)")
+    start = time.perf_counter()
+    system = cassie_on_stand(path)
+    loaded = time.perf_counter()
+    equations = kronlag.derive(system)
+    derived = time.perf_counter()
+    model = equations.numeric(system.robot.values)
+    built = time.perf_counter()
+    _, rest = static_equilibrium(model, system)
+    at_rest = dict(zip(model.constraint_names, rest.lam))
+    q0, qd0 = np.zeros(model.m), np.zeros(model.m)  # the file's pose, at rest
+    trajectory = kronlag.simulate(model, (0, DURATION), q0, qd0, t_eval=np.linspace(0, DURATION, 301))
+    simulated = time.perf_counter()
+    print(f"load {loaded - start:.1f} s, derive {derived - loaded:.1f} s, build {built - derived:.1f} s "
+          f"({model.backend}), equilibrium and simulation {simulated - built:.1f} s: {trajectory.message}")
+    print(f"constraint drift {np.max(np.abs(trajectory.position_residual)):.2g}, "
+          f"energy drift {np.ptp(trajectory.total_energy):.2g} J")
+    multipliers = dict(zip(model.constraint_names, trajectory.lam.T))
+    for joint, rows in loop_rows(system).items():
+        magnitude = np.linalg.norm(np.column_stack([multipliers[row] for row in rows]), axis=1)
+        print(f"{joint:>24}: |F| {magnitude.min():6.1f} .. {magnitude.max():6.1f} N, mean {magnitude.mean():6.1f} N, "
+              f"at rest {np.linalg.norm([at_rest[row] for row in rows]):6.1f} N")
+    plot(trajectory.t, multipliers, system, out, at_rest=at_rest)
+    print(f"wrote {out}")
+    return trajectory
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).parents[1] / "images" / "cassie_loop_reactions.png")
