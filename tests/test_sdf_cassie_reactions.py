@@ -66,7 +66,8 @@ def spring_balances(figure, model, q, lam):
     joints = {joint.name: joint for joint in robot.joints}
     coordinates = [x.name for x in system.coordinates]
     gravity = np.array([0.0, 0.0, -robot.values["g"]])
-    loops = {side: next(loop for loop in robot.loops if loop.joint == f"{side}-pitch-rod-joint") for side in ("left", "right")}
+    loops = {side: next(loop for loop in robot.loops if loop.joint == f"{side}-pitch-rod-joint")
+             for side in figure["legs_of"](system)}
     expressions = {}
     for side, loop in loops.items():
         hip = robot.frames[loop.frame]
@@ -100,16 +101,18 @@ def spring_balances(figure, model, q, lam):
 
 @pytest.mark.slow
 def test_achilles_rod_reactions_hold_the_springs_at_rest(figure):
-    """At the static equilibrium the script finds (~2 min: derive and C build of the held robot), for
-    each leg: the loop force on the Achilles rod (the multipliers ``<leg>-pitch-rod-joint.x .y .z``,
+    """At the static equilibrium the script finds for the figure's model (the left leg; ~1 min: derive
+    and C build): the loop force on the Achilles rod (the multipliers ``<leg>-pitch-rod-joint.x .y .z``,
     components in the hip-pitch link's frame), with the weights of the links beyond, gives about the
     heel spring's and the knee spring's axes the moment ``k theta`` of the spring (file stiffness,
     deflection at rest), and none about the rod's own hinge; to 1e-8 relative."""
-    system = figure["cassie_on_stand"](figure["cassie_file"]())
+    system = figure["cassie_on_stand"](figure["cassie_file"](), legs=figure["FIGURE_LEGS"])
     model = kronlag.derive(system).numeric(system.robot.values)
     q, rest = figure["static_equilibrium"](model, system)
     assert np.max(np.abs(rest.qdd)) < 1e-8
-    for side, joint, moment, spring, scale in spring_balances(figure, model, q, rest.lam):
+    balances = spring_balances(figure, model, q, rest.lam)
+    assert [(side, joint) for side, joint, *_ in balances] == [("left", joint) for joint in BEYOND]
+    for side, joint, moment, spring, scale in balances:
         assert moment == pytest.approx(spring, abs=1e-8 * scale), (side, joint)
         if joint in figure["SPRINGS"]:
             assert abs(spring) > 1.0, (side, joint)  # N m: the spring is loaded, the check is not 0 = 0
