@@ -143,7 +143,7 @@ def plot(t: np.ndarray, multipliers: dict[str, np.ndarray], system: kronlag.Syst
 
     frames = {loop.joint: loop.frame for loop in system.robot.loops}
     legs = legs_of(system)
-    figure, grid = plt.subplots(len(LOOPS), len(legs), figsize=(6 * len(legs), 7.5), sharex=True, squeeze=False,
+    figure, grid = plt.subplots(len(LOOPS), len(legs), figsize=(3 + 6 * len(legs), 7.5), sharex=True, squeeze=False,
                                 layout="constrained")
     for (joint, rows), axes in zip(loop_rows(system).items(), grid.T.ravel()):
         values = np.column_stack([multipliers[row] for row in rows])
@@ -155,12 +155,11 @@ def plot(t: np.ndarray, multipliers: dict[str, np.ndarray], system: kronlag.Syst
         axes.set_title(f"{joint}: force on the {side} {LOOPS[loop]}, {frames[joint]} frame", fontsize=10)
         axes.set_ylabel("force [N]")
         axes.grid(alpha=0.3)
-        axes.legend(fontsize=8, loc="upper right", ncols=2)
+        axes.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))
     for axes in grid[-1]:
         axes.set_xlabel("time [s]")
-    figure.suptitle("Cassie (cassie_v2.sdf) hanging from its pelvis, motors held, leaf springs from the file, "
-                    "released at rest:\nthe loop reactions, named after the loop-closing joints "
-                    "(dotted: their values with the legs at rest on their springs)")
+    figure.suptitle("Cassie (cassie_v2.sdf) on a stand, motors held, leaf springs from the file, released at rest:\n"
+                    "the loop reactions, named after the loop-closing joints (dotted: their values at rest)")
     figure.savefig(path, dpi=110)
     plt.close(figure)
 
