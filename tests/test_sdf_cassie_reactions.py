@@ -51,15 +51,16 @@ def test_cassie_on_stand_names_its_loops_and_plots_them(figure, tmp_path):
     names = [row.name for row in system.constraints]
     t = np.linspace(0, 0.1, 5)
     figure["plot"](t, {name: np.full(t.size, float(k)) for k, name in enumerate(names)}, system,
-                   tmp_path / "loops.png", at_rest=dict.fromkeys(names, 1.0))
+                   tmp_path / "loops.png", xlabel="time [s]", title="test", at_rest=dict.fromkeys(names, 1.0))
     assert (tmp_path / "loops.png").stat().st_size > 10_000
 
 
-def spring_balances(figure, model, q, lam):
+def spring_balances(figure, model, q, lam, foot_force=0.0):
     """For each leg and each joint of :data:`BEYOND`: ``(leg, joint, moment, spring, scale)``, the moment
     about the joint's axis of the loop's force on the Achilles rod (``lam`` by ``constraint_names``,
-    components in the loop's frame) and of the weights of the links beyond the joint, the spring's
-    torque ``k theta`` there (0: no spring), and the size of the loop force's moment."""
+    components in the loop's frame), of the weights of the links beyond the joint and of an upward
+    ``foot_force`` (N) at the foot's centre of mass if the foot is beyond, the spring's torque
+    ``k theta`` there (0: no spring), and the size of the loop force's moment."""
     system, constraint_names = model.equations.system, list(model.constraint_names)
     robot = system.robot
     sdf = ET.parse(figure["cassie_file"]()).getroot().find("model")
@@ -93,7 +94,8 @@ def spring_balances(figure, model, q, lam):
             scale = float(np.linalg.norm(moment))
             for link in beyond:
                 mass = float(system.body(f"{side}-{link}").mass)
-                moment += np.cross(at[f"{side}-{link}"].ravel() - pivot, mass * gravity)
+                load = mass * gravity + (np.array([0.0, 0.0, foot_force]) if link == "foot" else 0.0)
+                moment += np.cross(at[f"{side}-{link}"].ravel() - pivot, load)
             spring = figure["SPRINGS"].get(joint, 0.0) * q[coordinates.index(spec.coordinate)]
             balances.append((side, joint, float(axis @ moment), spring, scale))
     return balances
@@ -101,18 +103,22 @@ def spring_balances(figure, model, q, lam):
 
 @pytest.mark.slow
 def test_achilles_rod_reactions_hold_the_springs_at_rest(figure):
-    """At the static equilibrium the script finds for the figure's model (the left leg; ~1 min: derive
-    and C build): the loop force on the Achilles rod (the multipliers ``<leg>-pitch-rod-joint.x .y .z``,
-    components in the hip-pitch link's frame), with the weights of the links beyond, gives about the
-    heel spring's and the knee spring's axes the moment ``k theta`` of the spring (file stiffness,
-    deflection at rest), and none about the rod's own hinge; to 1e-8 relative."""
-    system = figure["cassie_on_stand"](figure["cassie_file"](), legs=figure["FIGURE_LEGS"])
+    """The figure's model (the left leg pushed up at the foot by ``FOOT_LOAD * t``; ~1 min: derive and C
+    build), at rest on its springs at t = 0 (no push) and t = 1 (the full push, 300 N): the loop force
+    on the Achilles rod (the multipliers ``left-pitch-rod-joint.x .y .z``, components in the hip-pitch
+    link's frame), with the weights of the links beyond and the push, gives about the heel spring's
+    and the knee spring's axes the moment ``k theta`` of the spring (file stiffness, deflection at
+    rest), and none about the rod's own hinge; to 1e-8 of the loop force's moment."""
+    system = figure["cassie_on_stand"](figure["cassie_file"](), legs=figure["FIGURE_LEGS"],
+                                       foot_load=figure["FOOT_LOAD"])
     model = kronlag.derive(system).numeric(system.robot.values)
-    q, rest = figure["static_equilibrium"](model, system)
-    assert np.max(np.abs(rest.qdd)) < 1e-8
-    balances = spring_balances(figure, model, q, rest.lam)
-    assert [(side, joint) for side, joint, *_ in balances] == [("left", joint) for joint in BEYOND]
-    for side, joint, moment, spring, scale in balances:
-        assert moment == pytest.approx(spring, abs=1e-8 * scale), (side, joint)
-        if joint in figure["SPRINGS"]:
-            assert abs(spring) > 1.0, (side, joint)  # N m: the spring is loaded, the check is not 0 = 0
+    q = None
+    for t in (0.0, 1.0):
+        q, rest = figure["static_equilibrium"](model, system, t=t, guess=q)
+        assert np.max(np.abs(rest.qdd)) < 1e-8
+        balances = spring_balances(figure, model, q, rest.lam, foot_force=figure["FOOT_LOAD"] * t)
+        assert [(side, joint) for side, joint, *_ in balances] == [("left", joint) for joint in BEYOND]
+        for side, joint, moment, spring, scale in balances:
+            assert moment == pytest.approx(spring, abs=1e-8 * scale), (t, joint)
+            if joint in figure["SPRINGS"]:
+                assert abs(spring) > 1.0, (t, joint)  # N m: the spring is loaded, the check is not 0 = 0

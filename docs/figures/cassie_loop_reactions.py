@@ -1,23 +1,26 @@
-"""Cassie's leg loops from its SDF file: the named loop reactions over time (docs/sdf.md).
+"""Cassie's leg loops from its SDF file: the named loop reactions, plotted (docs/sdf.md).
 
 example-robot-data's ``cassie_v2.sdf`` is read by :func:`kronlag.load_sdf` with its pelvis bolted to
 the world (a ``fixed`` joint from ``world`` to ``pelvis`` added to the file's text, SDFormat's way of
-fixing a model): Cassie on a stand, legs hanging.  The five joints per leg the file names ``-op``
-(its motors) are held at the file's pose by drives (their multipliers are the motor torques), and
-the knee and heel leaf springs act with the file's ``<spring_stiffness>`` (the reader keeps joint
-springs out of the dynamics, so they are added here as potentials).  Released at rest from the
-file's pose, springs undeflected, each leg drops onto its springs and oscillates about its static
-deflection; the loops' multipliers, named by the reader after the loop-closing joints
+fixing a model) and, for the figure, the right leg's links and joints taken out: Cassie's left leg
+on a stand.  The five joints the file names ``-op`` (its motors) are held at the file's pose by
+drives (their multipliers are the motor torques), and the knee and heel leaf springs act with the
+file's ``<spring_stiffness>`` (the reader keeps joint springs out of the dynamics, so they are added
+here as potentials): the leg has one free mode, its springs.  An upward force on the foot grows from
+0 to 300 N (the ground pushing the leg of a robot standing on it); at each value the leg is found at
+rest on its springs, and the loops' multipliers, named by the reader after the loop-closing joints
 (``left-pitch-rod-joint.x`` ...: the force on the joint's parent link, the Achilles or plantar rod,
 in newtons, components in the frame of the loop's nearest common ancestor link), are plotted.
 
-The right foot's loop is planar only to about 7e-8 rad in the file, so its out-of-plane row
-``right-plantar-foot-joint.z`` depends on the others (``kronlag check`` lists it): it is dropped, as
-the reader drops the left foot's identically zero one, so that every multiplier is unique.
+With both legs (``cassie_on_stand(path)``), the right foot's loop, planar only to about 7e-8 rad in
+the file, has an out-of-plane row ``right-plantar-foot-joint.z`` that depends on the others
+(``kronlag check`` lists it): it is dropped, as the reader drops the left foot's identically zero
+one, so that every multiplier is unique.
 
 Run: ``python docs/figures/cassie_loop_reactions.py [out.png]`` (needs example-robot-data; about
-2 minutes: load ~10 s, derive ~10 s, C build ~1 min, simulation a few seconds).  It writes
-``docs/images/cassie_loop_reactions.png`` by default.
+40 s the first time - load ~10 s, derive ~8 s, C build ~30 s - 20 s once the build is cached in
+``KRONLAG_CACHE``; the 41 rests take 0.3 s).  It writes ``docs/images/cassie_loop_reactions.png``
+by default.
 """
 
 from __future__ import annotations
@@ -47,9 +50,10 @@ LOOPS = {"pitch-rod-joint": "Achilles rod", "plantar-foot-joint": "plantar rod"}
 DEPENDENT_ROW = "right-plantar-foot-joint.z"
 #: SDFormat's fixed joint from the world: the pelvis on a stand.
 STAND = '<joint name="stand" type="fixed"><parent>world</parent><child>pelvis</child></joint>\n'
-DURATION = 0.3  # s
+#: N: the ground's push on the foot at the end of the figure (Cassie, ~33 kg, standing on one leg).
+FOOT_LOAD = 300.0
 SIDES = ("left", "right")
-#: The leg the figure shows: one leg halves the kernels the simulation compiles (see ``main``).
+#: The leg the figure shows (the other is its mirror image, and one leg halves the build).
 FIGURE_LEGS = ("left",)
 
 
@@ -62,11 +66,12 @@ def cassie_file() -> Path | None:
     return path if path.is_file() else None
 
 
-def cassie_on_stand(path: Path, *, legs: tuple[str, ...] = SIDES) -> kronlag.System:
+def cassie_on_stand(path: Path, *, legs: tuple[str, ...] = SIDES, foot_load: float = 0.0) -> kronlag.System:
     """Cassie from ``path`` with its pelvis fixed to the world and only the ``legs`` named (the other
     leg's links and joints taken out of the file's text), its motors held by drives (named after the
     joints) and its leaf springs as potentials (named ``"<joint> spring"``); the dependent row of the
-    right foot's loop removed."""
+    right foot's loop removed.  ``foot_load`` (N/s): an upward force ``foot_load * t`` on each foot's
+    centre of mass (named ``"<leg> ground force"``), as the ground pushes a leg that stands on it."""
     document = ElementTree.fromstring(path.read_text())  # example-robot-data's file, not user input
     model = document.find("model")
     for element in list(model):
@@ -87,6 +92,9 @@ def cassie_on_stand(path: Path, *, legs: tuple[str, ...] = SIDES) -> kronlag.Sys
         for spring, stiffness in SPRINGS.items():
             angle = by_name[coordinates[f"{side}-{spring}"]]
             system.add_potential(stiffness * angle ** 2 / 2, name=f"{side}-{spring} spring")
+        if foot_load:
+            system.add_force(system.body(f"{side}-foot").position, (0, 0, foot_load * kronlag.t),
+                             name=f"{side} ground force")
     system.constraints[:] = [row for row in system.constraints if row.name != DEPENDENT_ROW]
     return system
 
@@ -104,22 +112,24 @@ def loop_rows(system: kronlag.System) -> dict[str, list[str]]:
             for side in legs_of(system) for loop in LOOPS}
 
 
-def static_equilibrium(model: kronlag.NumericModel, system: kronlag.System, *, tol: float = 1e-10,
-                       max_iterations: int = 30) -> tuple[np.ndarray, kronlag.ForwardDynamicsResult]:
-    """The legs at rest on their springs: ``(q, forward dynamics at (q, 0))`` with every acceleration
-    below ``tol``.  Each leg has one free mode (motors held); the knee springs' angles are found by the
+def static_equilibrium(model: kronlag.NumericModel, system: kronlag.System, *, t: float = 0.0, guess=None,
+                       tol: float = 1e-10, max_iterations: int = 30) -> tuple[np.ndarray, kronlag.ForwardDynamicsResult]:
+    """The legs at rest on their springs at time ``t`` (the drives' values then): ``(q, forward dynamics
+    at (q, 0, t))`` with every acceleration below ``tol``, found from ``guess`` (default the file's pose).  Each leg has one free mode (motors held); the knee springs' angles are found by the
     secant method on their accelerations at rest, the other coordinates assembled around them."""
     springs = [next(joint.coordinate for joint in system.robot.joints if joint.name == f"{side}-knee-shin-joint")
                for side in legs_of(system)]
     index = [[x.name for x in system.coordinates].index(name) for name in springs]
-    guess, at_rest = np.zeros(model.m), np.zeros(model.m)
+    guess = np.zeros(model.m) if guess is None else np.asarray(guess, dtype=float)
+    at_rest = np.zeros(model.m)
 
     def accelerations(angles: np.ndarray) -> tuple[np.ndarray, kronlag.ForwardDynamicsResult]:
-        q, _ = model.assemble(guess, fixed=dict(zip(springs, angles)))
-        return q, model.forward_dynamics(q, at_rest)
+        q, _ = model.assemble(guess, fixed=dict(zip(springs, angles)), t=t)
+        return q, model.forward_dynamics(q, at_rest, t)
 
-    previous, (q, result) = np.zeros(len(springs)), accelerations(np.zeros(len(springs)))
-    angles = np.full(len(springs), -0.01)  # rad: a first step, the way the legs sag
+    previous = guess[index]
+    q, result = accelerations(previous)
+    angles = previous - 0.01  # rad: a first step, the way the legs sag
     for _ in range(max_iterations):
         last = result.qdd[index]
         guess = q
@@ -132,10 +142,10 @@ def static_equilibrium(model: kronlag.NumericModel, system: kronlag.System, *, t
                                    f"max |qdd| = {np.max(np.abs(result.qdd)):.3g}", float(np.max(np.abs(result.qdd))))
 
 
-def plot(t: np.ndarray, multipliers: dict[str, np.ndarray], system: kronlag.System, path: Path, *,
-         at_rest: dict[str, float]) -> None:
+def plot(x: np.ndarray, multipliers: dict[str, np.ndarray], system: kronlag.System, path: Path, *, xlabel: str,
+         title: str, at_rest: dict[str, float] | None = None) -> None:
     """A panel per loop (rows: the Achilles and plantar rods, columns: left and right leg): each named
-    multiplier (``multipliers[name]`` over ``t``) and the force's magnitude, dotted their values at rest."""
+    multiplier (``multipliers[name]`` over ``x``) and the force's magnitude, dotted the values ``at_rest``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -148,18 +158,18 @@ def plot(t: np.ndarray, multipliers: dict[str, np.ndarray], system: kronlag.Syst
     for (joint, rows), axes in zip(loop_rows(system).items(), grid.T.ravel()):
         values = np.column_stack([multipliers[row] for row in rows])
         for row, column in zip(rows, values.T):
-            line, = axes.plot(t, column, label=row)
-            axes.axhline(at_rest[row], color=line.get_color(), linestyle=":", linewidth=1)
-        axes.plot(t, np.linalg.norm(values, axis=1), "k--", label="|F|")
+            line, = axes.plot(x, column, label=row)
+            if at_rest is not None:
+                axes.axhline(at_rest[row], color=line.get_color(), linestyle=":", linewidth=1)
+        axes.plot(x, np.linalg.norm(values, axis=1), "k--", label="|F|")
         side, loop = joint.split("-", 1)
         axes.set_title(f"{joint}: force on the {side} {LOOPS[loop]}, {frames[joint]} frame", fontsize=10)
         axes.set_ylabel("force [N]")
         axes.grid(alpha=0.3)
         axes.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))
     for axes in grid[-1]:
-        axes.set_xlabel("time [s]")
-    figure.suptitle("Cassie (cassie_v2.sdf) on a stand, motors held, leaf springs from the file, released at rest:\n"
-                    "the loop reactions, named after the loop-closing joints (dotted: their values at rest)")
+        axes.set_xlabel(xlabel)
+    figure.suptitle(title)
     figure.savefig(path, dpi=110)
     plt.close(figure)
 
@@ -170,43 +180,48 @@ def cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
-def main(out: Path, *, legs: tuple[str, ...] = FIGURE_LEGS) -> kronlag.Trajectory:
-    """Build, find the rest, simulate from the file's pose and plot into ``out``; print the times and
-    the reactions' ranges.  The simulation runs the switching method, which starts with ALI3-P: the
-    singular ratio of Cassie's ``Phi_q`` is ~6e-4 even at rest (``APPROACH_RTOL`` is 0.05), so the
-    index-1 methods would stop at once; ALI3-P's compiled driver needs the tangent kernel (derivatives
-    of the whole dynamics), generated once per model, the longest step of the run."""
+def press(out: Path, *, legs: tuple[str, ...] = FIGURE_LEGS) -> dict[str, np.ndarray]:
+    """The figure of the page: the leg at rest on its springs, motors held, while a vertical force on
+    the foot grows from 0 to :data:`FOOT_LOAD` (:func:`static_equilibrium` at each value: the ground
+    pushing the leg of a robot that stands on it); the loops' multipliers by name against the force.
+    Prints the times and returns the multipliers."""
     path = cassie_file()
     if path is None:
         sys.exit("example-robot-data is not installed (pip install example-robot-data)")
     times = [(time.perf_counter(), cpu_seconds())]
-    system = cassie_on_stand(path, legs=legs)
+    system = cassie_on_stand(path, legs=legs, foot_load=FOOT_LOAD)  # the full load at t = 1
     times.append((time.perf_counter(), cpu_seconds()))
     equations = kronlag.derive(system)
     times.append((time.perf_counter(), cpu_seconds()))
     model = equations.numeric(system.robot.values)
     times.append((time.perf_counter(), cpu_seconds()))
-    _, rest = static_equilibrium(model, system)
-    at_rest = dict(zip(model.constraint_names, rest.lam))
-    times.append((time.perf_counter(), cpu_seconds()))
-    q0, qd0 = np.zeros(model.m), np.zeros(model.m)  # the file's pose, at rest
-    trajectory = kronlag.simulate(model, (0, DURATION), q0, qd0, t_eval=np.linspace(0, DURATION, 301))
+    instants, q, rows = np.linspace(0, 1, 41), np.zeros(model.m), []
+    for instant in instants:
+        q, rest = static_equilibrium(model, system, t=instant, guess=q, tol=1e-6)  # rad/s^2: at rest
+        rows.append(rest.lam)
     times.append((time.perf_counter(), cpu_seconds()))
     print(", ".join(f"{step} {end[0] - start[0]:.1f} s (CPU {end[1] - start[1]:.1f} s)" for step, start, end in
-                    zip(("load", "derive", f"build ({model.backend})", "rest", "simulation"), times, times[1:])))
-    print(f"{trajectory.message}; methods: "
-          + "; ".join(f"{part.method} from t = {part.t_start:.3g} s ({part.reason})" for part in trajectory.intervals))
-    print(f"constraint drift {np.max(np.abs(trajectory.position_residual)):.2g}, "
-          f"energy drift {np.ptp(trajectory.total_energy):.2g} J")
-    multipliers = dict(zip(model.constraint_names, trajectory.lam.T))
+                    zip(("load", "derive", f"build ({model.backend})", f"{len(instants)} rests"), times, times[1:])))
+    springs = {joint.name: q[[x.name for x in system.coordinates].index(joint.coordinate)] for joint in system.robot.joints
+               if joint.name.partition("-")[2] in SPRINGS}
+    print("spring deflections at the full load: " + ", ".join(f"{name} {np.degrees(angle):.2f} deg"
+                                                              for name, angle in springs.items()))
+    multipliers = dict(zip(model.constraint_names, np.array(rows).T))
+    report(system, multipliers)
+    plot(FOOT_LOAD * instants, multipliers, system, out, xlabel="upward force on the foot [N]",
+         title="Cassie (cassie_v2.sdf) on a stand, motors held: its left leg pushed up at the foot,\n"
+               "at rest on the file's leaf springs; the loop reactions, named after the loop-closing joints")
+    print(f"wrote {out}")
+    return multipliers
+
+
+def report(system: kronlag.System, multipliers: dict[str, np.ndarray]) -> None:
+    """Print each loop's force range."""
     for joint, rows in loop_rows(system).items():
         magnitude = np.linalg.norm(np.column_stack([multipliers[row] for row in rows]), axis=1)
-        print(f"{joint:>24}: |F| {magnitude.min():6.1f} .. {magnitude.max():6.1f} N, mean {magnitude.mean():6.1f} N, "
-              f"at rest {np.linalg.norm([at_rest[row] for row in rows]):6.1f} N")
-    plot(trajectory.t, multipliers, system, out, at_rest=at_rest)
-    print(f"wrote {out}")
-    return trajectory
+        print(f"{joint:>24}: |F| from {magnitude[0]:6.1f} N to {magnitude[-1]:6.1f} N "
+              f"(min {magnitude.min():6.1f}, max {magnitude.max():6.1f})")
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).parents[1] / "images" / "cassie_loop_reactions.png")
+    press(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).parents[1] / "images" / "cassie_loop_reactions.png")
