@@ -51,7 +51,7 @@ def test_cassie_on_stand_names_its_loops_and_plots_them(figure, tmp_path):
     names = [row.name for row in system.constraints]
     t = np.linspace(0, 0.1, 5)
     figure["plot"](t, {name: np.full(t.size, float(k)) for k, name in enumerate(names)}, system,
-                   tmp_path / "loops.png", xlabel="time [s]", title="test", at_rest=dict.fromkeys(names, 1.0))
+                   tmp_path / "loops.png", xlabel="time [s]", title="test")
     assert (tmp_path / "loops.png").stat().st_size > 10_000
 
 

@@ -114,9 +114,10 @@ def loop_rows(system: kronlag.System) -> dict[str, list[str]]:
 
 def static_equilibrium(model: kronlag.NumericModel, system: kronlag.System, *, t: float = 0.0, guess=None,
                        tol: float = 1e-10, max_iterations: int = 30) -> tuple[np.ndarray, kronlag.ForwardDynamicsResult]:
-    """The legs at rest on their springs at time ``t`` (the drives' values then): ``(q, forward dynamics
-    at (q, 0, t))`` with every acceleration below ``tol``, found from ``guess`` (default the file's pose).  Each leg has one free mode (motors held); the knee springs' angles are found by the
-    secant method on their accelerations at rest, the other coordinates assembled around them."""
+    """The legs at rest on their springs at time ``t`` (the loads then): ``(q, forward dynamics at
+    (q, 0, t))`` with every acceleration below ``tol``, found from ``guess`` (default the file's pose).
+    Each leg has one free mode (motors held); the knee springs' angles are found by the secant method
+    on their accelerations at rest, the other coordinates assembled around them."""
     springs = [next(joint.coordinate for joint in system.robot.joints if joint.name == f"{side}-knee-shin-joint")
                for side in legs_of(system)]
     index = [[x.name for x in system.coordinates].index(name) for name in springs]
@@ -143,9 +144,9 @@ def static_equilibrium(model: kronlag.NumericModel, system: kronlag.System, *, t
 
 
 def plot(x: np.ndarray, multipliers: dict[str, np.ndarray], system: kronlag.System, path: Path, *, xlabel: str,
-         title: str, at_rest: dict[str, float] | None = None) -> None:
-    """A panel per loop (rows: the Achilles and plantar rods, columns: left and right leg): each named
-    multiplier (``multipliers[name]`` over ``x``) and the force's magnitude, dotted the values ``at_rest``."""
+         title: str) -> None:
+    """A panel per loop (rows: the Achilles and plantar rods, columns: the legs): each named multiplier
+    (``multipliers[name]`` over ``x``) and the force's magnitude."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -158,9 +159,7 @@ def plot(x: np.ndarray, multipliers: dict[str, np.ndarray], system: kronlag.Syst
     for (joint, rows), axes in zip(loop_rows(system).items(), grid.T.ravel()):
         values = np.column_stack([multipliers[row] for row in rows])
         for row, column in zip(rows, values.T):
-            line, = axes.plot(x, column, label=row)
-            if at_rest is not None:
-                axes.axhline(at_rest[row], color=line.get_color(), linestyle=":", linewidth=1)
+            axes.plot(x, column, label=row)
         axes.plot(x, np.linalg.norm(values, axis=1), "k--", label="|F|")
         side, loop = joint.split("-", 1)
         axes.set_title(f"{joint}: force on the {side} {LOOPS[loop]}, {frames[joint]} frame", fontsize=10)
@@ -209,7 +208,7 @@ def press(out: Path, *, legs: tuple[str, ...] = FIGURE_LEGS) -> dict[str, np.nda
     multipliers = dict(zip(model.constraint_names, np.array(rows).T))
     report(system, multipliers)
     plot(FOOT_LOAD * instants, multipliers, system, out, xlabel="upward force on the foot [N]",
-         title="Cassie (cassie_v2.sdf) on a stand, motors held: its left leg pushed up at the foot,\n"
+         title=f"Cassie (cassie_v2.sdf) on a stand, motors held: its {' and '.join(legs)} leg pushed up at the foot,\n"
                "at rest on the file's leaf springs; the loop reactions, named after the loop-closing joints")
     print(f"wrote {out}")
     return multipliers
