@@ -1,9 +1,9 @@
 """Cassie's named loop reactions (issue 21, item 7; docs/sdf.md): the model of
-``docs/figures/cassie_loop_reactions.py`` (pelvis on a stand, motors held, the file's leaf springs)
-at its static equilibrium, its Achilles rods' reactions checked against statics computed here from
-the file's geometry and masses alone: about each leaf spring's axis, the moment of the loop's force
-and of the weights of the parts beyond the spring balances the spring's torque ``k theta``; about
-the rod's own hinge, the loop force balances the rod's weight.  Skipped without example-robot-data."""
+``docs/figures/cassie_loop_reactions.py`` (pelvis on a stand, motors held, the file's leaf springs,
+the foot pushed up) at rest, its Achilles rod's reactions checked against statics computed here from
+the file's geometry and masses alone: about each leaf spring's axis, the moment of the loop's force,
+of the weights of the parts beyond the spring and of the push balances the spring's torque
+``k theta``; about the rod's own hinge, the loop force balances the rod's weight.  Skipped without example-robot-data."""
 
 from __future__ import annotations
 

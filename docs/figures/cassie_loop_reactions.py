@@ -18,8 +18,8 @@ the file, has an out-of-plane row ``right-plantar-foot-joint.z`` that depends on
 one, so that every multiplier is unique.
 
 Run: ``python docs/figures/cassie_loop_reactions.py [out.png]`` (needs example-robot-data; about
-40 s the first time - load ~10 s, derive ~8 s, C build ~30 s - 20 s once the build is cached in
-``KRONLAG_CACHE``; the 41 rests take 0.3 s).  It writes ``docs/images/cassie_loop_reactions.png``
+30 s with an empty ``KRONLAG_CACHE`` - load 5 s, derive 5 s, C build 21 s, 20 s of CPU in all -
+10 s once the build is cached; the 41 rests take 0.2 s).  It writes ``docs/images/cassie_loop_reactions.png``
 by default.
 """
 
