@@ -5,6 +5,8 @@
 - numeric models of the built-in models with random parameter values, on either backend;
 - the paper's four-bar and quick-return, and a cart-pole, written as bodies + joints;
 - a planar mechanism with redundant constraints (a parallelogram with a third crank);
+- ``bench/bench_robots.py`` as a module and the example-robot-data files it names, skipping
+  without Pinocchio or the data;
 - trajectories built from closed-form kinematics, for testing graphics without
   :func:`kronlag.simulate` (kinematically exact, the constraints hold to rounding, but not
   dynamically meaningful: multipliers and energies are smooth stand-ins).
@@ -13,7 +15,9 @@
 from __future__ import annotations
 
 import functools
+import importlib.util
 import random
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -434,3 +438,27 @@ period = 0.02
 [simulation]
 t_end = 2.0
 """
+
+
+# -- bench/bench_robots.py and example-robot-data ----------------------------------------------------
+
+
+@functools.cache
+def robots_bench():
+    """``bench/bench_robots.py`` as a module: its robot tables (``ROBOTS``, ``FLOATING``) and the
+    Pinocchio references (loaded from its file; ``bench/`` is no package)."""
+    spec = importlib.util.spec_from_file_location(
+        "bench_robots", Path(__file__).resolve().parents[1] / "bench" / "bench_robots.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def example_robot(relative: str) -> Path:
+    """The example-robot-data file at ``relative`` (under its robots folder, e.g.
+    ``robots_bench().ROBOTS["ur5"]``); the test is skipped without Pinocchio or the data."""
+    pytest.importorskip("pinocchio")
+    folder = robots_bench().robots_folder()
+    if folder is None:
+        pytest.skip("example-robot-data is not installed")
+    return folder / relative

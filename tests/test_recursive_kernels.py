@@ -5,21 +5,24 @@ example-robot-data's arms (skipped without pin and example-robot-data)."""
 
 from __future__ import annotations
 
-import importlib.util
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 import sympy as sp
+from helpers import example_robot, robots_bench
 
 import kronlag
-from kronlag.core.kernels import SCALAR_NAMESPACE, cse_kernel, python_functions, python_source
+from kronlag.core.kernels import (
+    SCALAR_NAMESPACE,
+    cse_kernel,
+    python_functions,
+    python_source,
+)
 from kronlag.model.robot_formats import RobotFileWarning
 from kronlag.numeric.codegen import LAYOUTS, KernelSource
 from kronlag.numeric.codegen.recursive import dynamics_algorithm
-
-BENCH = Path(__file__).resolve().parents[1] / "bench" / "bench_robots.py"
 
 #: A tree with what the recursion must take: a general (non-principal) revolute axis, rpy angles that
 #: are not multiples of pi/2, a continuous joint, a prismatic joint, links merged by fixed joints (one
@@ -148,13 +151,6 @@ def test_the_flat_kernel_is_kept_where_the_recursion_does_not_apply(tree):
 
 # -- the arms of example-robot-data against Pinocchio ---------------------------------------------------
 
-def _bench():
-    spec = importlib.util.spec_from_file_location("bench_robots", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 ARMS = ("ur5", "panda", "xarm7", "so100", "z1", "kinova")
 
 
@@ -164,12 +160,8 @@ def test_arms_recursive_kernel_agrees_with_flat_and_pinocchio(name):
     """M and h of the dynamics kernel (Python backend) against the flat kernel to 1e-12 and against
     Pinocchio's crba and nonLinearEffects (M, tau - nle) and the accelerations against aba (the
     Panda's mimic finger: the exact constrained solution from Pinocchio's M and nle) to 1e-9."""
-    pytest.importorskip("pinocchio")
-    bench = _bench()
-    folder = bench.robots_folder()
-    if folder is None:
-        pytest.skip("example-robot-data is not installed")
-    path = folder / bench.ROBOTS[name]
+    bench = robots_bench()
+    path = example_robot(bench.ROBOTS[name])
     system = load(path)
     assert dynamics_algorithm(system) == "recursive"
     equations = kronlag.derive(system)
@@ -197,11 +189,7 @@ def test_arms_recursive_kernel_agrees_with_flat_and_pinocchio(name):
 @pytest.mark.slow
 def test_c_backend_runs_the_recursive_kernel():
     """The C library of a robot (UR5) prints the recursive kernel unchanged: same values as Python."""
-    bench = _bench()
-    folder = bench.robots_folder()
-    if folder is None:
-        pytest.skip("example-robot-data is not installed")
-    system = load(folder / bench.ROBOTS["ur5"])
+    system = load(example_robot(robots_bench().ROBOTS["ur5"]))
     equations = kronlag.derive(system)
     values = dict(system.robot.values)
     compiled, interpreted = (equations.numeric(values, backend=backend) for backend in ("c", "python"))
@@ -217,7 +205,7 @@ def test_tree_agrees_with_pinocchio(tree):
     """The tree's M and h (general axis, prismatic and mimic joints, merged and massless links) against
     Pinocchio's crba and nonLinearEffects on the same file."""
     pytest.importorskip("pinocchio")
-    bench = _bench()
+    bench = robots_bench()
     system = load(tree)
     moving = [joint for joint in system.robot.joints if joint.coordinate]
     rng = np.random.default_rng(8)

@@ -5,19 +5,17 @@ and Cassie's closed loops (skipped without pin and example-robot-data)."""
 
 from __future__ import annotations
 
-import importlib.util
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 import sympy as sp
+from helpers import example_robot, robots_bench
 
 import kronlag
 from kronlag.model.robot_formats import RobotFileWarning
 from kronlag.model.rotations import EULER_PARAMETERS, RotationSequence
-
-BENCH = Path(__file__).resolve().parents[1] / "bench" / "bench_robots.py"
 
 BODY = """  <link name="{name}">
     <inertial><origin xyz="{c}" rpy="0 0 0"/><mass value="2.0"/>
@@ -140,21 +138,6 @@ def test_sdf_ball_joint_and_floating_model(tmp_path):
 
 # -- against Pinocchio's free flyer --------------------------------------------------------------
 
-def _bench():
-    spec = importlib.util.spec_from_file_location("bench_robots", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def _folder(bench):
-    pytest.importorskip("pinocchio")
-    folder = bench.robots_folder()
-    if folder is None:
-        pytest.skip("example-robot-data is not installed")
-    return folder
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["solo12", "a1", "go2"])
 def test_floating_robots_agree_with_pinocchio(name):
@@ -162,8 +145,8 @@ def test_floating_robots_agree_with_pinocchio(name):
     aba of Pinocchio's free-flyer model at random states, mapped as documented in
     bench_robots.FloatingReference (the derivation takes 10-60 s; the Python backend skips the C build).
     Go1, ANYmal (B, C) and HyQ are refused as shipped: an inertial violates the triangle inequality."""
-    bench = _bench()
-    path = _folder(bench) / bench.FLOATING[name]
+    bench = robots_bench()
+    path = example_robot(bench.FLOATING[name])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RobotFileWarning)
         system = kronlag.load_urdf(path, floating_base=True)
@@ -204,11 +187,10 @@ def test_cassie_loops_close_and_its_mobility_is_counted_right():
     foot four-bars: the left one's out-of-plane row is identically zero and dropped, the right one's is
     planar only to ~7e-8 rad, and the rank policy of kronlag.numeric.tolerances counts it dependent);
     the mobility 18 = 29 coordinates - 1 normalization - 10, against m - r = 17."""
-    bench = _bench()
-    folder = _folder(bench)
+    bench = robots_bench()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RobotFileWarning)
-        system = kronlag.load_sdf(folder / bench.CASSIE)
+        system = kronlag.load_sdf(example_robot(bench.CASSIE))
     assert (len(system.bodies), len(system.coordinates)) == (23, 29)
     assert system.robot.redundant == ["left-plantar-foot-joint.z"]
     ranks, mobility, residual = bench.loop_ranks(system)

@@ -4,19 +4,17 @@ arms (skipped without pin and example-robot-data)."""
 
 from __future__ import annotations
 
-import importlib.util
 import re
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import example_robot, robots_bench
 
 import kronlag
 from kronlag.core.errors import ModelFileError
 from kronlag.model.robot_formats import RobotFileWarning
-
-BENCH = Path(__file__).resolve().parents[1] / "bench" / "bench_robots.py"
 
 LINK = """  <link name="{name}">
     <inertial><origin xyz="{cx} 0 0" rpy="0 0 0"/><mass value="{mass}"/>
@@ -207,24 +205,13 @@ def test_load_model_and_cli_accept_urdf(tmp_path, capsys):
 
 # -- agreement with Pinocchio on files nobody here wrote -------------------------------------------
 
-def _bench():
-    spec = importlib.util.spec_from_file_location("bench_robots", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 FAST_ROBOTS = ("ur5", "z1", "double_pendulum")
 SLOW_ROBOTS = ("panda", "so100", "kinova", "xarm7", "ur3")
 
 
 def _agree(name, backend="auto"):
-    pytest.importorskip("pinocchio")
-    bench = _bench()
-    folder = bench.robots_folder()
-    if folder is None:
-        pytest.skip("example-robot-data is not installed")
-    path = folder / bench.ROBOTS[name]
+    bench = robots_bench()
+    path = example_robot(bench.ROBOTS[name])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RobotFileWarning)
         system = kronlag.load_urdf(path)
