@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import os
 import sys
+import types
 
 import numpy as np
 import pytest
@@ -158,6 +159,21 @@ def test_spawned_workers_give_the_same_results(model, pool_calls, monkeypatch):
     spawned = run(model, workers=2)
     assert pool_calls == [2]
     assert without_wall_time(spawned).equals(without_wall_time(run(model, workers=0)))
+
+
+@pytest.mark.parametrize("library", ["jax", "jaxlib", "torch"])
+def test_workers_are_not_forked_from_under_a_library_with_threads_of_its_own(monkeypatch, library):
+    """JAX's threads are native (``threading`` does not count them) and a child forked from under them
+    can deadlock: once such a library is imported the workers are spawned."""
+    from kronlag.studies import local_pool
+
+    monkeypatch.setattr(local_pool.threading, "active_count", lambda: 1)
+    monkeypatch.setattr(local_pool.sys, "platform", "linux")
+    for name in local_pool.NATIVE_THREADS:
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    assert local_pool.start_method() == "fork"
+    monkeypatch.setitem(sys.modules, library, types.ModuleType(library))
+    assert local_pool.start_method() == "spawn"
 
 
 class Terminal(io.StringIO):

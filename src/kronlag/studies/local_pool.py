@@ -2,7 +2,7 @@
 
 A local Dask cluster costs seconds to start (a scheduler, nannies, each worker importing kronlag
 afresh), as much as a few hundred cases; these workers are forked from the calling process where that
-is safe (Linux, no other thread running), so they start in milliseconds with the model and its C
+is safe (Linux, no other thread running, JAX not imported), so they start in milliseconds with the model and its C
 library already loaded.  Each worker runs one batch at a time; the next batch goes to whichever
 worker is free (the load balances itself).  A worker that dies (a crash in a case, killed) is
 replaced; its batch is split into single cases and run again, each up to ``retries`` times, so that
@@ -33,10 +33,17 @@ def usable_cpus() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
+#: Libraries that run threads of their own once imported, which :mod:`threading` does not count: a
+#: child forked from under them can deadlock (JAX warns so at every fork).
+NATIVE_THREADS = ("jax", "jaxlib", "torch")
+
+
 def start_method() -> str:
     """``"fork"`` on Linux when no other thread runs in this process (a fork copies only the calling
-    thread, so a lock held by another could never be released in the child); ``"spawn"`` otherwise."""
-    if sys.platform.startswith("linux") and threading.active_count() == 1:
+    thread, so a lock held by another could never be released in the child): none that :mod:`threading`
+    counts and none of :data:`NATIVE_THREADS` imported; ``"spawn"`` otherwise."""
+    if (sys.platform.startswith("linux") and threading.active_count() == 1
+            and not any(name in sys.modules for name in NATIVE_THREADS)):
         return "fork"
     return "spawn"
 
