@@ -266,6 +266,19 @@ static double kl_watch_step(kl_monitor *monitor, double t, const double *x, cons
     return kl_monitor_observe(monitor, t, x, at_x ? terms + KL_PHI_Q : Phi_q);
 }
 
+/* The outputs at the start o->t0, the state x (o->y0, consistent): one row with outputs at every step,
+ * else one for each output time at or before t0 (*next advanced past them).  Returns the rows written. */
+static int kl_outputs_first(kronlag_options *o, const double *x, int *next)
+{
+    int rows = 0;
+    while (o->n_eval == 0 ? rows == 0 : *next < o->n_eval && o->t_eval[*next] <= o->t0) {
+        o->t_out[rows] = o->n_eval == 0 ? o->t0 : o->t_eval[(*next)++];  /* every step: t0 itself */
+        memcpy(o->y_out + rows * KL_N, x, KL_N * sizeof(double));
+        kl_control_record(o, rows++);
+    }
+    return rows;
+}
+
 /* The outputs at the step's end t, x (the integrator's state, copied): with outputs at every step
  * (n_eval == 0) one row, else a row for each output time at t; each projected (at_x: terms, B, c hold
  * the constraints at x).  *rows, *next advanced.  Returns 0 or KRONLAG_RESULT_PROJECTION_FAILED. */
@@ -487,18 +500,7 @@ int kronlag_cvode(kronlag_options *o)
         if (CVodeRootInit(mem, n_roots, kl_roots) || CVodeSetRootDirection(mem, directions)) goto done;
     }
     flag = KRONLAG_RESULT_SUCCESS;
-    if (n_eval == 0) {
-        o->t_out[0] = t0;
-        memcpy(y_out, x, KL_N * sizeof(double));
-        kl_control_record(o, 0);
-        rows = 1;
-    } else {
-        for (; next < n_eval && t_eval[next] <= t0; ++next, ++rows) {
-            o->t_out[rows] = t_eval[next];
-            memcpy(y_out + rows * KL_N, x, KL_N * sizeof(double));
-            kl_control_record(o, rows);
-        }
-    }
+    rows = kl_outputs_first(o, x, &next);
     for (long steps = 0; t < t1; ++steps) {
         if (steps >= o->max_steps) { flag = KRONLAG_RESULT_MAX_STEPS; break; }
         double limit = kl_monitor_max_step(&monitor);

@@ -165,33 +165,23 @@ int kronlag_dop853(kronlag_options *o)
     kl_monitor monitor;
     kl_progress progress = {kl_clock()};
     kl_index1_start(o, p, &data, &monitor, terms, B, c);
-    kl8_state *s = calloc(1, sizeof *s);  /* 23 rows of 2 m: on the heap, not a thread's stack */
+    kl8_state *s = calloc(1, sizeof *s);  /* 26 rows of 2 m: on the heap, not a thread's stack */
     double t = t0, t_sample = kl_control_next_sample(o), h_abs = 0.0;
     long steps = 0;
     memcpy(o->y_end, o->y0, KL_N * sizeof(double));
     if (!s) { flag = KRONLAG_RESULT_SOLVER_FAILED; goto done; }
     s->data = &data;
     memcpy(s->y, o->y0, sizeof s->y);
-    if (n_eval == 0) {
-        o->t_out[0] = t0;
-        memcpy(y_out, s->y, KL_N * sizeof(double));
-        kl_control_record(o, 0);
-        rows = 1;
-    } else {
-        for (; next < n_eval && t_eval[next] <= t0; ++next, ++rows) {
-            o->t_out[rows] = t_eval[next];
-            memcpy(y_out + rows * KL_N, s->y, KL_N * sizeof(double));
-            kl_control_record(o, rows);
-        }
+    rows = kl_outputs_first(o, s->y, &next);
+    if (t0 < t1) {  /* the slope at the start and the first step (given, or Hairer's estimate) */
+        if (kl8_rhs(s, t0, s->y, s->f)) flag = KRONLAG_RESULT_SINGULAR;
+        else if (o->h0 > 0.0) h_abs = o->h0;
+        else if (kl8_first_step(s, t0, fmin(t1, t_sample), max_step, rtol, atol, &h_abs)) flag = KRONLAG_RESULT_SINGULAR;
     }
-    if (t0 < t1 && kl8_rhs(s, t0, s->y, s->f)) flag = KRONLAG_RESULT_SINGULAR;
-    if (!flag && t0 < t1 && o->h0 > 0.0) h_abs = o->h0;
-    else if (!flag && t0 < t1 && kl8_first_step(s, t0, fmin(t1, t_sample), max_step, rtol, atol, &h_abs))
-        flag = KRONLAG_RESULT_SINGULAR;
     while (!flag && t < t1) {
         if (steps >= o->max_steps) { flag = KRONLAG_RESULT_MAX_STEPS; break; }
-        double t_stop = fmin(t1, t_sample), limit = fmin(max_step, kl_monitor_max_step(&monitor) > 0.0
-                                                                      ? kl_monitor_max_step(&monitor) : INFINITY);
+        double t_stop = fmin(t1, t_sample), watched = kl_monitor_max_step(&monitor);  /* 0: no limit */
+        double limit = watched > 0.0 ? fmin(max_step, watched) : max_step;
         double min_step = 10 * fabs(nextafter(t, INFINITY) - t), y_new[KL_N], h = 0.0, t_new = t;
         if (h_abs > limit) h_abs = limit;
         else if (h_abs < min_step) h_abs = min_step;
