@@ -1,14 +1,14 @@
 /* kronlag: forward dynamics with multipliers, the augmented system solved by a null-space method
  * (see kronlag.numeric.solve_augmented for the algorithm, and tolerances.py for the rank policy). */
 
-/* x <- (I - tau v v^T) x for a reflector v (length, zero before start: the loops begin there). */
-static inline void kronlag_reflect(const double *v, int start, int length, double tau, double *x)
+/* x <- (I - tau v v^T) x for a reflector v of the given length, zero before its first entry: the loops run
+ * over the whole length, a constant of the model (unrolled and vectorized; the zeros add nothing). */
+static inline void kronlag_reflect(const double *v, int length, double tau, double *x)
 {
-    if (tau == 0.0) return;
     double w = 0.0;
-    for (int i = start; i < length; ++i) w += v[i] * x[i];
+    for (int i = 0; i < length; ++i) w += v[i] * x[i];
     w *= tau;
-    for (int i = start; i < length; ++i) x[i] -= w * v[i];
+    for (int i = 0; i < length; ++i) x[i] -= w * v[i];
 }
 
 /* Solve [[M, G^T], [G, 0]] [qdd; nu] = [h; c] with G = [Phi_q; A] (K x m), rank-revealing.
@@ -70,12 +70,12 @@ static int kronlag_solve_many(const double *terms, const double *qd, double alph
         /* y = Q^T h; constraint part y1 = Q1^T qdd: T y1 = W^T P^T c (least squares when redundant
          * rows are inconsistent); the responses (e > 0) have c = 0: no constraint part. */
         memcpy(y, e == 0 ? h : forcing + (e - 1) * m, sizeof y);
-        for (int j = 0; j < rho; ++j) kronlag_reflect(V + j * m, j, m, tau[j], y);
+        for (int j = 0; j < rho; ++j) kronlag_reflect(V + j * m, m, tau[j], y);
         for (int i = 0; i < rho; ++i) qt[i] = 0.0;
         if (e == 0) {
             double cp[k + 1];
             for (int i = 0; i < k; ++i) cp[i] = c[perm[i]];
-            for (int j = 0; j < rho; ++j) kronlag_reflect(U + j * k, j, k, wtau[j], cp);
+            for (int j = 0; j < rho; ++j) kronlag_reflect(U + j * k, k, wtau[j], cp);
             for (int i = rho - 1; i >= 0; --i) {
                 double sum = cp[i];
                 for (int j = i + 1; j < rho; ++j) sum -= W[i * k + j] * qt[j];
@@ -99,10 +99,10 @@ static int kronlag_solve_many(const double *terms, const double *qd, double alph
             a[i] = sum / W[i * k + i];
         }
         for (int i = rho; i < k; ++i) a[i] = 0.0;
-        for (int j = rho - 1; j >= 0; --j) kronlag_reflect(U + j * k, j, k, wtau[j], a);
+        for (int j = rho - 1; j >= 0; --j) kronlag_reflect(U + j * k, k, wtau[j], a);
         for (int i = 0; i < k; ++i) nu[e * (k + 1) + perm[i]] = a[i];
         /* qdd = Q qt */
-        for (int j = rho - 1; j >= 0; --j) kronlag_reflect(V + j * m, j, m, tau[j], qt);
+        for (int j = rho - 1; j >= 0; --j) kronlag_reflect(V + j * m, m, tau[j], qt);
         memcpy(qdd + e * m, qt, m * sizeof *qt);
     }
     return 0;
