@@ -389,3 +389,46 @@ def test_four_bar_friction_solve_agrees_with_the_python_reference():
         for c, python in zip(solved["c"], solved["python"]):
             np.testing.assert_allclose(c.qdd, python.qdd, rtol=1e-10, atol=1e-10 * np.max(np.abs(python.qdd)))
             np.testing.assert_allclose(c.lam, python.lam, rtol=1e-10, atol=1e-10 * np.max(np.abs(python.lam)))
+
+
+# -- the Newton steps of the friction solve ----------------------------------------------------------
+
+def test_friction_newton_steps_stop_when_the_error_bound_is_within_the_tolerance():
+    """The friction forces' Newton steps stop once the error they leave is within FRICTION_RTOL of the
+    largest force: the last step's change is, or the bound from the contraction theta of the last two steps
+    (theta / (1 - theta) times the last change) is, which saves the step that would only confirm it.  A
+    first step (no contraction known) or steps that do not contract are not taken as converged by the
+    bound."""
+    from kronlag.numeric.friction import _converged
+    from kronlag.numeric.tolerances import FRICTION_RTOL
+
+    assert _converged(0.0, 0.0, 0.0)  # no force at all
+    assert _converged(0.5 * FRICTION_RTOL, 0.0, 1.0)  # the step itself within the tolerance
+    assert not _converged(1e-7, 0.0, 1.0)  # a first step
+    assert _converged(1e-7, 1.0, 1.0)  # theta 1e-7: about 1e-14 left
+    assert not _converged(1e-6, 1.0, 1.0)  # theta 1e-6: about 1e-12 left
+    assert not _converged(2 * FRICTION_RTOL, 2 * FRICTION_RTOL, 1.0)  # no contraction
+
+
+def test_four_bar_friction_solve_stopped_by_the_bound_agrees_with_steps_to_the_tolerance(monkeypatch):
+    """The solve stopped by the contraction bound (both backends) gives the (qdd, lambda) of Newton steps
+    run until a step itself is below FRICTION_RTOL (the Python reference so), at moving states of the
+    four-bar, to far below any integrator tolerance."""
+    import kronlag.numeric.friction as friction
+    from kronlag.numeric.tolerances import FRICTION_RTOL
+
+    model_file = kronlag.load_model(FOUR_BAR, apply_drives=False)
+    equations = kronlag.derive(model_file.system)
+    models = {backend: equations.numeric(model_file.values, backend=backend) for backend in _backends()}
+    fastest = models[_backends()[-1]]
+    q0, qd0 = initial_state(model_file, fastest)
+    states = kronlag.simulate(fastest, (0, 0.2), q0, qd0, rtol=1e-8, atol=1e-10,
+                              t_eval=np.linspace(0, 0.2, 3))
+    bound = {backend: [model.forward_dynamics(q, qd, t) for t, q, qd in zip(states.t, states.q, states.qd)]
+             for backend, model in models.items()}
+    monkeypatch.setattr(friction, "_converged", lambda change, previous, largest: change <= FRICTION_RTOL * largest)
+    strict = [models["python"].forward_dynamics(q, qd, t) for t, q, qd in zip(states.t, states.q, states.qd)]
+    for solutions in bound.values():
+        for solution, reference in zip(solutions, strict):
+            for got, want in ((solution.qdd, reference.qdd), (solution.lam, reference.lam)):
+                np.testing.assert_allclose(got, want, rtol=1e-11, atol=1e-11 * np.max(np.abs(want)))

@@ -131,6 +131,17 @@ def _load_slope(record: dict, wrench: np.ndarray) -> np.ndarray:
     return slope
 
 
+def _converged(change: float, previous: float, largest: float) -> bool:
+    """Whether a Newton step that changed the forces by at most ``change`` (the step before by ``previous``,
+    0 for the first) left them within ``FRICTION_RTOL * largest``: the step itself is that small, or the
+    error bound from the contraction ``theta = change / previous`` of the last two steps, ``theta / (1 -
+    theta) * change`` (exact for linear convergence, an upper bound for Newton's quadratic one), is; the
+    second saves the step that would only confirm what the last one found."""
+    theta = change / previous if previous > 0.0 else 1.0
+    return change <= FRICTION_RTOL * largest or (theta < 1.0 and theta / (1.0 - theta) * change
+                                                 <= FRICTION_RTOL * largest)
+
+
 def solve_with_friction(solve: Callable[[np.ndarray], tuple], flat: np.ndarray, h_offset: int,
                         records: np.ndarray, qd: np.ndarray) -> tuple:
     """Forward dynamics with friction: ``(qdd, lam, mu, rank)`` as ``solve(flat)`` returns them (the
@@ -156,7 +167,7 @@ def solve_with_friction(solve: Callable[[np.ndarray], tuple], flat: np.ndarray, 
         responses.append([after - before for after, before in zip(solution[:3], base[:3])])
     wrenches = [_wrench(joint, base[1]) for joint, _, _ in active]
     unit_wrenches = [[_wrench(joint, response[1]) for response in responses] for joint, _, _ in active]
-    forces = np.zeros(len(active))
+    forces, previous = np.zeros(len(active)), 0.0
     for _ in range(FRICTION_MAX_ITERATIONS):
         residual, jacobian = np.zeros(len(active)), np.eye(len(active))
         for j, (joint, factor, viscous) in enumerate(active):
@@ -168,11 +179,12 @@ def solve_with_friction(solve: Callable[[np.ndarray], tuple], flat: np.ndarray, 
             step = np.linalg.solve(jacobian, residual)
         except np.linalg.LinAlgError:
             break
-        forces = forces - step
-        if np.max(np.abs(step), initial=0.0) <= FRICTION_RTOL * np.max(np.abs(forces), initial=0.0):
+        forces, change = forces - step, float(np.max(np.abs(step), initial=0.0))
+        if _converged(change, previous, float(np.max(np.abs(forces), initial=0.0))):
             qdd, lam, mu = (part + sum(f * response[k] for f, response in zip(forces, responses))
                             for k, part in enumerate(base[:3]))
             return qdd, lam, mu, base[3]
+        previous = change
     raise NumericalError(f"the joints' friction forces did not converge in {FRICTION_MAX_ITERATIONS} Newton "
                          "steps (a wedged joint: the friction grows with the load faster than the load allows)")
 

@@ -91,8 +91,9 @@ RESTING_GAP = 10.0
 #: Limits: a gap at most ``CONTACT_GAP * atol`` (in its own units) at the start is in contact there.
 CONTACT_GAP = 10.0
 #: Joint friction (:mod:`kronlag.numeric.friction`): the friction forces ``f`` solved together with
-#: ``(qdd, lambda)`` (they depend on the normal loads, hence on ``lambda``) are converged when a Newton
-#: step changes none by more than ``FRICTION_RTOL`` times the largest: far below any integrator
+#: ``(qdd, lambda)`` (they depend on the normal loads, hence on ``lambda``) are converged when the error
+#: left after a Newton step (that step's change, or the bound from the contraction of the last two steps:
+#: ``numeric.friction._converged``) is at most ``FRICTION_RTOL`` times the largest: far below any integrator
 #: tolerance, so that the right-hand side is a function of the state to rounding (not lagged).
 FRICTION_RTOL = 1e-13
 #: Most Newton steps of that solve (a few suffice: the loads are piecewise linear in ``f``); not converged

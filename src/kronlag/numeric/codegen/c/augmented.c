@@ -1,6 +1,16 @@
 /* kronlag: forward dynamics with multipliers, the augmented system solved by a null-space method
  * (see kronlag.numeric.solve_augmented for the algorithm, and tolerances.py for the rank policy). */
 
+/* x <- (I - tau v v^T) x for a reflector v of the given length, zero before its first entry: the loops run
+ * over the whole length, a constant of the model (unrolled and vectorized; the zeros add nothing). */
+static inline void kronlag_reflect(const double *v, int length, double tau, double *x)
+{
+    double w = 0.0;
+    for (int i = 0; i < length; ++i) w += v[i] * x[i];
+    w *= tau;
+    for (int i = 0; i < length; ++i) x[i] -= w * v[i];
+}
+
 /* Solve [[M, G^T], [G, 0]] [qdd; nu] = [h; c] with G = [Phi_q; A] (K x m), rank-revealing.
  * terms: the output of kronlag_dynamics (the blocks of codegen.LAYOUTS["dynamics"]).
  * max_rank caps the numerical rank at the generic rank of G, which an integrator knows from its
@@ -49,28 +59,34 @@ static int kronlag_solve_many(const double *terms, const double *qd, double alph
     int n = m - rho;
     double *B22 = B + rho * m + rho;
     if (cholesky_upper(B22, n, m)) return 1;
+    /* The reflectors of X and W as contiguous vectors (v[j] = 1, zero above), read by every right-hand side. */
+    double V[(k + 1) * m + 1], U[(k + 1) * (k + 1) + 1];
+    for (int j = 0; j < rho; ++j) {
+        for (int i = 0; i < m; ++i) V[j * m + i] = i < j ? 0.0 : i == j ? 1.0 : X[i * k + j];
+        for (int i = 0; i < k; ++i) U[j * k + i] = i < j ? 0.0 : i == j ? 1.0 : W[i * k + j];
+    }
     for (int e = 0; e < count; ++e) {
-        double y[m], cp[k + 1], qt[m + 1], a[k + 1];
+        double y[m], qt[m + 1], a[k + 1];
         /* y = Q^T h; constraint part y1 = Q1^T qdd: T y1 = W^T P^T c (least squares when redundant
-         * rows are inconsistent). */
+         * rows are inconsistent); the responses (e > 0) have c = 0: no constraint part. */
         memcpy(y, e == 0 ? h : forcing + (e - 1) * m, sizeof y);
-        for (int j = 0; j < rho; ++j) house_apply(X, m, k, j, tau[j], y, 1);
+        for (int j = 0; j < rho; ++j) kronlag_reflect(V + j * m, m, tau[j], y);
+        for (int i = 0; i < rho; ++i) qt[i] = 0.0;
         if (e == 0) {
+            double cp[k + 1];
             for (int i = 0; i < k; ++i) cp[i] = c[perm[i]];
-            for (int j = 0; j < rho; ++j) house_apply(W, k, k, j, wtau[j], cp, 1);
+            for (int j = 0; j < rho; ++j) kronlag_reflect(U + j * k, k, wtau[j], cp);
             for (int i = rho - 1; i >= 0; --i) {
                 double sum = cp[i];
                 for (int j = i + 1; j < rho; ++j) sum -= W[i * k + j] * qt[j];
                 qt[i] = sum / W[i * k + i];
             }
-        } else {
-            for (int i = 0; i < rho; ++i) qt[i] = 0.0; /* c = 0: no constraint part */
         }
         /* Null-space part y2: (Z^T M Z) y2 = Z^T h - Z^T M Q1 y1. */
         double *z = qt + rho;
         for (int i = 0; i < n; ++i) {
             double sum = y[rho + i];
-            for (int j = 0; j < rho; ++j) sum -= B[(rho + i) * m + j] * qt[j];
+            for (int j = 0; j < rho && e == 0; ++j) sum -= B[(rho + i) * m + j] * qt[j];
             z[i] = sum;
         }
         cholesky_solve(B22, n, m, z);
@@ -78,15 +94,15 @@ static int kronlag_solve_many(const double *terms, const double *qd, double alph
          * R1 = T^T W^T, so P^T nu = W T^{-T} (Q1^T (h - M qdd)). */
         for (int i = 0; i < rho; ++i) {
             double sum = y[i];
-            for (int j = 0; j < m; ++j) sum -= B[i * m + j] * qt[j];
+            for (int j = e == 0 ? 0 : rho; j < m; ++j) sum -= B[i * m + j] * qt[j];
             for (int j = 0; j < i; ++j) sum -= W[j * k + i] * a[j];
             a[i] = sum / W[i * k + i];
         }
         for (int i = rho; i < k; ++i) a[i] = 0.0;
-        for (int j = rho - 1; j >= 0; --j) house_apply(W, k, k, j, wtau[j], a, 1);
+        for (int j = rho - 1; j >= 0; --j) kronlag_reflect(U + j * k, k, wtau[j], a);
         for (int i = 0; i < k; ++i) nu[e * (k + 1) + perm[i]] = a[i];
         /* qdd = Q qt */
-        for (int j = rho - 1; j >= 0; --j) house_apply(X, m, k, j, tau[j], qt, 1);
+        for (int j = rho - 1; j >= 0; --j) kronlag_reflect(V + j * m, m, tau[j], qt);
         memcpy(qdd + e * m, qt, m * sizeof *qt);
     }
     return 0;
@@ -192,7 +208,8 @@ static int kronlag_small_solve(double *A, double *b, int n)
 /* The solve with the friction of the joints: the solution is linear in h, so the responses to a
  * unit friction force of each joint (the forcing -J_j, right-hand sides sharing the factorization)
  * give the solution for any friction forces f, and f = phi(lambda(f)) is found by Newton steps
- * to KRONLAG_FRICTION_RTOL.  A joint whose force is zero whatever the load (held by its stick row:
+ * to KRONLAG_FRICTION_RTOL (the error left bounded from the last two steps' contraction, as
+ * kronlag.numeric.friction._converged: 2.2 steps a call on the four-bar instead of 3.15).  A joint whose force is zero whatever the load (held by its stick row:
  * r mu and c count nothing; or r mu(v) = 0 and no viscous term) needs no response: only the others
  * are unknowns (a linkage at rest in all its pins costs one right-hand side, as without friction).
  * The steps start from f = 0 at every call, so that the solution is a function of (t, q, qd, p) alone:
@@ -264,6 +281,7 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
     /* Newton steps on g(f) = f - r mu N(f) - c v = 0 (N(f) piecewise linear in f: its derivative is the
      * unit direction of the force and couple parts times their responses), from f = 0 */
     int converged = 0;
+    double previous = 0.0;  /* the last step's largest change */
     for (int step = 0; step < KRONLAG_FRICTION_MAX_ITERATIONS && !converged; ++step) {
         double jacobian[nf * nf + 1], residual[nf + 1];
         for (int c = 0; c < na; ++c) {
@@ -298,7 +316,13 @@ static int kronlag_friction_solve(double t, const double *q, const double *qd, c
             change = fmax(change, fabs(residual[c]));
             largest = fmax(largest, fabs(forces[c]));
         }
-        converged = change <= KRONLAG_FRICTION_RTOL * largest;
+        /* the error left after this step, bounded from the contraction theta of the last two steps
+         * (theta / (1 - theta) times this step's change, valid for linear convergence and an upper
+         * bound for Newton's quadratic one): a step less than confirming what the last one found */
+        double theta = previous > 0.0 ? change / previous : 1.0;
+        converged = change <= KRONLAG_FRICTION_RTOL * largest
+                    || (theta < 1.0 && theta / (1.0 - theta) * change <= KRONLAG_FRICTION_RTOL * largest);
+        previous = change;
     }
     if (!converged) return 2;
     for (int i = 0; i < m; ++i) {
