@@ -62,7 +62,7 @@ def test_cassie_constrained_dynamics_agree_with_pinocchio(peers):
     Pinocchio's contact forces, all to <= 1e-9 relative (measured: ~1e-11).  A redundant loop's
     reaction is unique only along its independent rows: the feet's out-of-plane components are not
     compared (the left foot's row is dropped, the right foot's counted dependent).  The build takes
-    ~1 min (the Python backend: load ~10 s, derive ~9 s, common subexpressions ~30 s)."""
+    ~20 s of CPU (the Python backend: load ~6 s, derive ~2 s, kernels ~8 s)."""
     bench_robots, pinocchio_sdf, path = peers
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RobotFileWarning)

@@ -86,7 +86,7 @@ def _cassie() -> Path:
 
 @pytest.mark.slow
 def test_check_reports_cassie(capsys):
-    """``kronlag check cassie_v2.sdf`` (minutes: it derives and builds the whole model) reports the
+    """``kronlag check cassie_v2.sdf`` (~40 s of CPU: it derives and builds the whole model) reports the
     bodies, the loop-closing rows, the dropped zero row and the mobility 18 against m - r = 17
     (29 coordinates, 12 rows of rank 11: the right foot's out-of-plane row is dependent)."""
     with warnings.catch_warnings():

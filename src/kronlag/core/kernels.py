@@ -39,6 +39,7 @@ __all__ = [
     "cse_kernel",
     "linear_cse",
     "LINEAR_CSE_OUTPUTS",
+    "LINEAR_CSE_NODES",
     "literal",
     "python_source",
     "python_functions",
@@ -72,6 +73,8 @@ class Kernel:
     ``constants`` maps the placeholder symbols ``K<i>`` standing for numbers
     that are not small exact integers or fractions to their double values
     (printed as correctly rounded floating-point literals, see :func:`literal`).
+    ``large``: its subexpressions were eliminated by :func:`linear_cse` (the C backend keeps the
+    temporaries of such kernels local to the function that uses them).
     """
 
     name: str
@@ -79,6 +82,7 @@ class Kernel:
     temporaries: tuple[tuple[se.Symbol, se.Basic], ...]
     outputs: tuple[se.Basic, ...]
     constants: dict[str, float] = field(default_factory=dict)
+    large: bool = False
 
     @property
     def size(self) -> int:
@@ -298,6 +302,26 @@ def python_source(kernel: Kernel, arguments: Sequence[str] = ("t", "q", "qd", "p
 #: model with a forward-dynamics target (chains up to n = 80: 6 646 outputs; the robots of
 #: example-robot-data, Talos 1 602), so that their code stays that of ``symengine.cse``.
 LINEAR_CSE_OUTPUTS = 8000
+#: Kernels whose expressions have more distinct subexpressions than this get :func:`linear_cse` too,
+#: however few their outputs: ``symengine.cse``'s time grows with the size of the expression graph
+#: (Cassie's ``h``, 29 outputs of 52 000 subexpressions: 92 s of CPU against 2.9 s; its whole
+#: ``"dynamics"`` kernel, 90 000).  Above Talos's ``"dynamics"`` kernel (39 500, 12 s against 1.9 s;
+#: the floating quadrupeds 7 500-8 400), so that the robots with a build target keep their code.
+LINEAR_CSE_NODES = 60_000
+
+
+def _more_nodes_than(exprs: Sequence[se.Basic], limit: int) -> bool:
+    """Whether ``exprs`` have more than ``limit`` distinct subexpressions (counted up to ``limit``)."""
+    seen: set[se.Basic] = set()
+    stack = list(exprs)
+    while stack:
+        node = stack.pop()
+        if node not in seen:
+            seen.add(node)
+            if len(seen) > limit:
+                return True
+            stack.extend(node.args)
+    return False
 
 
 def _rebuilt(expr: se.Basic, args: Sequence[se.Basic]) -> se.Basic:
@@ -384,11 +408,12 @@ def cse_kernel(name: str, blocks: Sequence[Block], matrices: Sequence[list[list[
                constants: Mapping[str, float]) -> Kernel:
     """The :class:`Kernel` ``name`` of the converted ``matrices`` (one per block), with common
     subexpressions eliminated over all of them: ``symengine.cse``, or :func:`linear_cse` above
-    :data:`LINEAR_CSE_OUTPUTS` outputs."""
+    :data:`LINEAR_CSE_OUTPUTS` outputs or :data:`LINEAR_CSE_NODES` distinct subexpressions."""
     flat = [entry for rows in matrices for row in rows for entry in row]
-    eliminate = linear_cse if len(flat) > LINEAR_CSE_OUTPUTS else se.cse
+    large = len(flat) > LINEAR_CSE_OUTPUTS or _more_nodes_than(flat, LINEAR_CSE_NODES)
+    eliminate = linear_cse if large else se.cse
     temporaries, outputs = eliminate(flat) if flat else ([], [])
-    return Kernel(name, tuple(blocks), tuple(temporaries), tuple(outputs), dict(constants))
+    return Kernel(name, tuple(blocks), tuple(temporaries), tuple(outputs), dict(constants), large)
 
 
 def python_functions(source: str, names: Sequence[str], namespace: Mapping[str, object]) -> dict[str, Callable]:

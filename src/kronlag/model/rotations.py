@@ -99,7 +99,7 @@ def axis_angle(axis, angle) -> sp.Matrix:
     if length == 0:
         raise ModelError("axis_angle: the axis is the zero vector")
     K = skew(direction if length == 1 else direction / length)
-    return sp.eye(3) + sp.sin(angle) * K + (1 - sp.cos(angle)) * K * K
+    return sp.eye(3) + sp.sin(angle) * K + (1 - sp.cos(angle)) * (K * K)  # K^2 first: constant for a constant axis
 
 
 def euler_sequence(axes: str, angles: Sequence, *, extrinsic: bool = False) -> sp.Matrix:

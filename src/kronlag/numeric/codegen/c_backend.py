@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import symengine as se
 
-from ...core import kernels as core_kernels
 from ...core.errors import CompilerError
 from ...core.kernels import PLACEHOLDER, Kernel, literal
 from ...model.friction import record_size
@@ -105,8 +104,8 @@ def c_kernel(kernel: Kernel, first_chunk: int) -> tuple[str, int]:
     The temporaries live in a workspace ``w``; the statements are split into
     functions of about :data:`C_CHUNK` characters, chunk ``c`` guarded by
     ``KRONLAG_IN_PART(first_chunk + c)`` so that parts compile in parallel (``first_chunk`` 0: all
-    in part 0, with the hand-written C).  In a kernel of more than
-    :data:`~kronlag.core.kernels.LINEAR_CSE_OUTPUTS` outputs (those of ``linear_cse``) a temporary
+    in part 0, with the hand-written C).  In a kernel of ``linear_cse``
+    (:attr:`~kronlag.core.kernels.Kernel.large`) a temporary
     used only in the function that computes it is a local variable there (:func:`_local_statements`).  Returns the code and the number of chunks.
     """
     def code(expr: se.Basic) -> str:
@@ -116,7 +115,7 @@ def c_kernel(kernel: Kernel, first_chunk: int) -> tuple[str, int]:
 
     targets = [symbol.name for symbol, _ in kernel.temporaries] + [f"out[{k}]" for k in range(len(kernel.outputs))]
     values = [code(expr) for _, expr in kernel.temporaries] + [code(expr) for expr in kernel.outputs]
-    if len(kernel.outputs) > core_kernels.LINEAR_CSE_OUTPUTS:
+    if kernel.large:
         chunks, workspace = _local_statements(targets, values)
     else:
         index = {symbol.name: f"w[{i}]" for i, (symbol, _) in enumerate(kernel.temporaries)}
