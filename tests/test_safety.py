@@ -211,7 +211,9 @@ def test_truncated_or_replaced_library_is_rebuilt_not_loaded(tmp_path):
 
 @pytest.mark.parametrize("backend", [pytest.param("c", marks=needs_compiler), "python"])
 @pytest.mark.parametrize("factor", [10**20, 2**64, sp.Rational(10**30, 3), sp.Rational(10**20 + 1, 3),
-                                    sp.Float("1e-300"), sp.Rational(1, 3), 7])
+                                    sp.Float("1e-300"), sp.Rational(1, 3), 7,
+                                    # parts of 16 digits: exact doubles, but SymEngine prints 15 digits
+                                    sp.Rational(10**15 + 1, 1024), sp.Float(0.99999968)])
 def test_constants_reach_the_code_correctly_rounded(factor, backend, tmp_path, monkeypatch):
     monkeypatch.setenv("KRONLAG_CACHE", str(tmp_path))
     model = point_mass(factor).numeric({"m1": 1.0}, backend=backend)

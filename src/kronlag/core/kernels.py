@@ -98,9 +98,12 @@ class Kernel:
         return values
 
 
-#: Integers and the numerators and denominators of fractions up to this size are exact doubles:
-#: they stay exact in SymEngine and print as C/Python numbers that the compiler reads exactly.
+#: Integers up to this size are exact doubles: they stay exact in SymEngine and print as C/Python
+#: numbers that the compiler reads exactly.
 _EXACT_LIMIT = 2**53
+#: The numerators and denominators of fractions that stay exact: SymEngine's C printer writes a
+#: fraction's parts with 15 significant digits (``1e+15/1024.0`` for ``(10**15 + 1)/1024``).
+_EXACT_FRACTION_LIMIT = 10**15 - 1
 
 #: The placeholder symbols ``K<i>`` of constants printed as literals (:attr:`Kernel.constants`).
 PLACEHOLDER = re.compile(r"\bK\d+\b")
@@ -128,8 +131,8 @@ def piecewise_form(expr: sp.Basic) -> sp.Basic:
 class ExpressionConverter:
     """SymPy -> SymEngine, memoized, with the inputs renamed (``renames``: e.g. ``q1`` -> ``q[0]``).
 
-    Numbers: integers and fractions whose parts are at most 2**53 stay exact
-    (they print as ``3`` or ``1.0/3.0``, exact doubles divided once, so correctly
+    Numbers: integers up to 2**53 and fractions whose parts have at most 15 digits stay
+    exact (they print as ``3`` or ``1.0/3.0``, exact doubles divided once, so correctly
     rounded); floats become such fractions when they can.  Every other real
     number (``10**20``, ``2**64``, ``1e-300``, ``1/3`` of huge parts) becomes a
     placeholder symbol ``K<i>`` whose value, ``float(number)`` (correctly
@@ -184,7 +187,7 @@ class ExpressionConverter:
             if not math.isfinite(value):
                 raise ModelError(f"the constant {number} overflows a double")
             number = sp.Rational(*value.as_integer_ratio())
-        if max(abs(number.p), number.q) <= _EXACT_LIMIT:
+        if max(abs(number.p), number.q) <= (_EXACT_LIMIT if number.q == 1 else _EXACT_FRACTION_LIMIT):
             return se.Rational(int(number.p), int(number.q))
         value = float(number)  # correctly rounded: SymPy divides Python integers
         if not math.isfinite(value):
