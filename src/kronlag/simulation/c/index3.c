@@ -305,7 +305,7 @@ int kronlag_index3(kronlag_options *o)
     if (!(s.constraint_scale > 0.0)) s.constraint_scale = 1.0;
     kl_monitor monitor;
     kl_progress progress = {kl_clock()};
-    kl_monitor_start(&monitor, t0, q, s.terms + KRONLAG_DYNAMICS_PHI_Q, o->events, o->max_events);
+    kl_monitor_start(&monitor, t0, q, s.terms + KRONLAG_DYNAMICS_PHI_Q, o->events, o->max_events, o->row_scale);
     int rows = 0, flag = KRONLAG_RESULT_SUCCESS, next = 0, retry = 0;
     int n_roots = kl_limit_count(o), rooted = 0;  /* limits: the watched functions at the step's start */
     double before[n_roots + 1], after[n_roots + 1];
