@@ -10,7 +10,9 @@ of singular configurations during a simulation -- decides it the same way:
 * an entry ``<= rank_rtol`` times the largest counts as zero (a dependent,
   redundant constraint row);
 * while integrating, the ratio of the smallest entry that should be nonzero
-  (at the rank of the start) to the largest falls like ``|t - t*|`` near a
+  (at the rank of the start) to the largest, each row of ``Phi_q`` measured in
+  its own unit (its norm at the start of the run, :func:`row_scales`: the
+  ratio does not depend on the constraints' units), falls like ``|t - t*|`` near a
   *singular configuration*, where ``Phi_q`` loses rank at an instant (IFToMM
   A02: all bars horizontal).  Below ``APPROACH_RTOL`` (condition number above
   20) the motion *approaches* one: the index-1 methods, which cannot tell the
