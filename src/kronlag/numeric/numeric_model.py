@@ -35,6 +35,7 @@ from .accessors import MatrixAccessors
 from .assembly import assemble
 from .codegen.layouts import split_terms
 from .inverse import solve_inverse_dynamics
+from .kernel_cache import cached_kernel_text
 from .parameters import ParameterValues
 from .results import ForwardDynamicsBatch, ForwardDynamicsResult, InverseDynamicsResult
 from .tolerances import RANK_RTOL, check_rank_rtol, matrix_rank
@@ -249,8 +250,9 @@ class NumericModel(MatrixAccessors):
         names = tuple(name for name in names if name not in _LIBRARY_GROUPS["dynamics"])  # in c_source already
         for name in names:
             if name not in self._c_kernels:
-                # in part 0: the library of a driver keeps the kernel parts of c_source, compiled already
-                self._c_kernels[name] = codegen.c_kernel(self._source.kernel(name), 0)[0]
+                # in part 0 (a driver's library keeps c_source's kernel parts); on disk, keyed by c_source
+                self._c_kernels[name] = cached_kernel_text(
+                    self.c_source, name, lambda: codegen.c_kernel(self._source.kernel(name), 0)[0])
         return "".join(self._c_kernels[name] for name in names)
 
     @property

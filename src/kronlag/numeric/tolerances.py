@@ -10,7 +10,9 @@ of singular configurations during a simulation -- decides it the same way:
 * an entry ``<= rank_rtol`` times the largest counts as zero (a dependent,
   redundant constraint row);
 * while integrating, the ratio of the smallest entry that should be nonzero
-  (at the rank of the start) to the largest falls like ``|t - t*|`` near a
+  (at the rank of the start) to the largest, each row of ``Phi_q`` measured in
+  its own unit (its norm at the start of the run, :func:`row_scales`: the
+  ratio does not depend on the constraints' units), falls like ``|t - t*|`` near a
   *singular configuration*, where ``Phi_q`` loses rank at an instant (IFToMM
   A02: all bars horizontal).  Below ``APPROACH_RTOL`` (condition number above
   20) the motion *approaches* one: the index-1 methods, which cannot tell the
@@ -52,7 +54,7 @@ __all__ = ["RANK_RTOL", "CHOLESKY_RTOL", "MAX_RANK_RTOL", "APPROACH_RTOL", "LEAV
            "STALL", "CVODE_TIGHTEST", "INDEX3_TIGHTEST", "ZERO_EIGENVALUE_RTOL", "RESTING_GAP",
            "CONTACT_GAP", "AT_REST", "RATE_CHANGE_STEP", "TURN_RTOL", "FRICTION_RTOL", "FRICTION_MAX_ITERATIONS", "SAME_INSTANT", "integrator_tolerances",
            "zero_eigenvalue_threshold", "numerical_rank", "matrix_rank", "check_rank_rtol", "rank_magnitudes",
-           "singular_ratio", "c_macros", "REDUNDANCY_PROBE", "REDUNDANCY_PROBE_RESIDUAL"]
+           "singular_ratio", "row_scales", "c_macros", "REDUNDANCY_PROBE", "REDUNDANCY_PROBE_RESIDUAL"]
 
 #: Default relative rank tolerance on ``[Phi_q; A]`` (see the module docstring).
 RANK_RTOL = 1e-8
@@ -188,15 +190,36 @@ def rank_magnitudes(Phi_q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return magnitudes, permutation
 
 
-def singular_ratio(Phi_q: np.ndarray, generic_rank: int) -> tuple[float, int]:
-    """``magnitude[rho - 1] / magnitude[0]`` of :func:`rank_magnitudes` (1 when there is nothing to
-    lose) and the constraint row behind it (-1 then): falls like ``|t - t*|`` near a singular
-    configuration (``kl_singular_ratio`` in ``simulation/c/monitor.c``)."""
+def row_scales(Phi_q: np.ndarray, rank_rtol: float) -> np.ndarray:
+    """The units of the constraint rows in the approach test: their norms in ``Phi_q`` at the start of
+    a run (``kl_row_scales`` in ``simulation/c/monitor.c``).  A row numerically zero there (norm at most
+    ``rank_rtol`` times the largest) is measured in the largest row's units (1 if every row is zero)."""
+    norms = np.linalg.norm(Phi_q, axis=1)
+    largest = norms.max(initial=0.0)
+    return np.where(norms > rank_rtol * largest, norms, largest if largest > 0.0 else 1.0)
+
+
+def singular_ratio(Phi_q: np.ndarray, generic_rank: int, scales: np.ndarray) -> tuple[float, int]:
+    """``magnitude[rho - 1] / magnitude[0]`` of :func:`rank_magnitudes` of the rows of ``Phi_q`` divided
+    by ``scales`` (:func:`row_scales` at the start of the run; 1 when there is nothing to lose) and the
+    constraint row behind it (-1 then): falls like ``|t - t*|`` near a singular configuration
+    (``kl_singular_ratio`` in ``simulation/c/monitor.c``).
+
+    Each row is measured in its own unit, its size at the start: the ratio does not depend on the
+    constraints' units (a loop in metres or in millimetres, a row in metres beside one in radians),
+    while a row whose gradient vanishes at the singular configuration (IFToMM A02's horizontal
+    closure rows) still falls with it, as rows scaled to unit norm at every step would not.  Of a rank
+    deficient ``Phi_q`` (``generic_rank`` below its rows: redundant constraints) only the
+    ``generic_rank`` rows its own pivoted QR puts first (the independent ones, in their order) are
+    kept: a dependent row nearly zero at the start (a loop planar to rounding) would otherwise be
+    scaled up to an arbitrary direction."""
     if generic_rank == 0:
         return 1.0, -1
-    magnitudes, permutation = rank_magnitudes(Phi_q)
+    rows = (np.arange(Phi_q.shape[0]) if generic_rank >= Phi_q.shape[0]
+            else np.sort(rank_magnitudes(Phi_q)[1][:generic_rank]))
+    magnitudes, permutation = rank_magnitudes(Phi_q[rows] / np.asarray(scales, dtype=float)[rows, None])
     ratio = magnitudes[generic_rank - 1] / magnitudes[0] if magnitudes[0] > 0 else 0.0
-    return float(ratio), int(permutation[generic_rank - 1])
+    return float(ratio), int(rows[permutation[generic_rank - 1]])
 
 
 def c_macros(rank_rtol: float) -> str:

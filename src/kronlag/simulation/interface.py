@@ -62,6 +62,7 @@ FIELDS: tuple[tuple[str, type, str, str], ...] = (
     ("max_steps", _L, "in", "most accepted steps"),
     ("max_order", _I, "in", "highest order of a variable-order method (0: all it has)"),
     ("handback", _I, "in", "nonzero: end with KRONLAG_HANDBACK once clear of a singular configuration"),
+    ("row_scale", _DOUBLES, "in", "the constraint rows' units in the approach test (r; NULL: their norms at t0)"),
     ("progress", Progress, "in", "called with t after accepted steps (NULL: not); nonzero: the code to end with"),
     ("progress_interval", _D, "in", "seconds between progress calls (0: after every accepted step)"),
     ("n_eval", _I, "in", "number of output times (0: every step is an output)"),

@@ -9,12 +9,12 @@ from collections.abc import Callable
 import numpy as np
 
 from ..core.errors import NumericalError, SingularConfigurationError
-from ..numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
+from ..numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, row_scales, singular_ratio
 from .problem import MultibodyProblem, Solution, SolverOptions
 from .trajectory import Result, SingularPassage
 from .watch import LimitStop, locate
 
-__all__ = ["Stepper", "ApproachWatch", "march", "approach_text", "stopped_text", "SUCCESS"]
+__all__ = ["Stepper", "ApproachWatch", "approach_scales", "march", "approach_text", "stopped_text", "SUCCESS"]
 
 
 SUCCESS = Result.SUCCESS.value
@@ -46,6 +46,13 @@ class Stepper(ABC):
         """Bound the next step (where the integrator allows it; else nothing)."""
 
 
+def approach_scales(problem: MultibodyProblem) -> np.ndarray:
+    """The constraint rows' units in the approach test of a run of ``problem``, the same in every
+    segment of it (:func:`kronlag.tolerances.row_scales` at its start; the compiled drivers'
+    ``row_scale``)."""
+    return row_scales(problem.model.Phi_q(problem.q0, problem.t0), problem.model.rank_rtol)
+
+
 class ApproachWatch:
     """The watch of ``src/kronlag/simulation/c/monitor.c`` for the Python-driven index-1 methods: the
     singular ratio of ``Phi_q`` (:func:`kronlag.tolerances.singular_ratio`) at every accepted step,
@@ -56,12 +63,13 @@ class ApproachWatch:
         self.model = problem.model
         Phi_q = self.model.Phi_q(problem.q0, problem.t0)
         self.generic_rank = numerical_rank(rank_magnitudes(Phi_q)[0], self.model.rank_rtol)
-        self.samples = [(problem.t0, singular_ratio(Phi_q, self.generic_rank)[0])]
+        self.scales = approach_scales(problem)
+        self.samples = [(problem.t0, singular_ratio(Phi_q, self.generic_rank, self.scales)[0])]
 
     def observe(self, t: float, y: np.ndarray) -> SingularPassage | None:
         """The approach at the accepted state ``(t, y)``, or None."""
         q = y[:self.model.m]
-        ratio, row = singular_ratio(self.model.Phi_q(q, t), self.generic_rank)
+        ratio, row = singular_ratio(self.model.Phi_q(q, t), self.generic_rank, self.scales)
         self.samples = [self.samples[-1], (t, ratio)]
         if ratio >= APPROACH_RTOL:
             return None

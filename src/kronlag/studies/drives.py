@@ -43,7 +43,7 @@ from ..numeric.reactions import (
     multiplier_units,
     reaction_columns,
 )
-from ..numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
+from ..numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, row_scales, singular_ratio
 from ..simulation.labelled import LabelledArrays, multiplier_columns
 from ..simulation.trajectory import ColumnExport
 
@@ -270,7 +270,7 @@ def _accelerations(model: NumericModel, q: np.ndarray, qd: np.ndarray, time: flo
     return least_norm(model.Phi_q(q, time), model.gamma(q, qd, time), rank_rtol=model.rank_rtol)
 
 
-def _advance(model: NumericModel, state: tuple, time: float, tol: float, *, depth: int) -> tuple:
+def _advance(model: NumericModel, state: tuple, time: float, tol: float, *, depth: int, scales: np.ndarray) -> tuple:
     """The state ``(t, q, qd, qdd)`` at ``time`` from ``state``: Newton from the Taylor predictor,
     the step halved (sub-steps, not outputs) while the Newton correction is not small against
     the step's displacement (:data:`BRANCH_RATIO`)."""
@@ -292,14 +292,15 @@ def _advance(model: NumericModel, state: tuple, time: float, tol: float, *, dept
         raise _Stop(f"{where}: {failure}" if failure is not None else
                     f"{where}: the positions cannot be followed on their assembly branch (the Newton "
                     f"correction stays large against the step after {_MAX_HALVINGS} halvings)")
-    middle = _advance(model, state, start + h / 2, tol, depth=depth + 1)
-    _check_regular(model, *middle[:2])
-    return _advance(model, middle, time, tol, depth=depth + 1)
+    middle = _advance(model, state, start + h / 2, tol, depth=depth + 1, scales=scales)
+    _check_regular(model, *middle[:2], scales)
+    return _advance(model, middle, time, tol, depth=depth + 1, scales=scales)
 
 
-def _check_regular(model: NumericModel, time: float, q: np.ndarray) -> None:
-    """:class:`_Stop` where ``Phi_q`` nears a rank loss (the singular ratio below ``APPROACH_RTOL``)."""
-    ratio, row = singular_ratio(model.Phi_q(q, time), model.m)
+def _check_regular(model: NumericModel, time: float, q: np.ndarray, scales: np.ndarray) -> None:
+    """:class:`_Stop` where ``Phi_q`` nears a rank loss (the singular ratio below ``APPROACH_RTOL``, the
+    rows in the units ``scales``: :func:`~kronlag.numeric.tolerances.row_scales` at the first time)."""
+    ratio, row = singular_ratio(model.Phi_q(q, time), model.m, scales)
     if ratio < APPROACH_RTOL:
         raise _Stop(f"at t = {time:g}, q = {np.array2string(q, precision=6)}: Phi_q is nearly singular "
                     f"(ratio {ratio:.3g} < {APPROACH_RTOL:g}, constraint "
@@ -379,6 +380,7 @@ def kinematic_analysis(model: NumericModel, t, q_guess, *, points: Sequence[str]
         raise
     magnitudes, _ = rank_magnitudes(model.Phi_q(q, times[0]))
     rank = numerical_rank(magnitudes, model.rank_rtol)
+    scales = row_scales(model.Phi_q(q, times[0]), model.rank_rtol)
     if rank < model.m:
         raise ModelError(f"{system.name} is not fully driven at t = {times[0]:g}: rank Phi_q = {rank} < m = "
                          f"{model.m}, {model.m - rank} degree(s) of freedom left; add drives "
@@ -389,8 +391,8 @@ def kinematic_analysis(model: NumericModel, t, q_guess, *, points: Sequence[str]
     for k, time in enumerate(times):
         try:
             if k:
-                state = _advance(model, state, float(time), tol, depth=0)
-            _check_regular(model, *state[:2])
+                state = _advance(model, state, float(time), tol, depth=0, scales=scales)
+            _check_regular(model, *state[:2], scales)
         except _Stop as stop:
             message = str(stop)
             break

@@ -249,7 +249,7 @@ static void kl_index1_start(kronlag_options *o, const double *p, kl_data *data, 
         rank_magnitudes(B, KL_K, KL_M, magnitudes, perm);
         data->generic_rank = rank_of(magnitudes, KL_K < KL_M ? KL_K : KL_M);
     }
-    kl_monitor_start(monitor, o->t0, o->y0, terms + KL_PHI_Q, o->events, o->max_events);
+    kl_monitor_start(monitor, o->t0, o->y0, terms + KL_PHI_Q, o->events, o->max_events, o->row_scale);
 }
 
 /* The watch of singular configurations after a step to (t, x): the singular ratio there (1 without

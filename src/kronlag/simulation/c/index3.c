@@ -23,8 +23,10 @@
  * Phi_q v = 0 and Phi_q a = gamma in the metric of J (mass-orthogonal):
  *     J v <- J v - h^2/4 alpha Phi_q^T Phi_q v,
  *     J a <- J a - h^2/4 alpha Phi_q^T (Phi_q a - gamma(q, v)).
- * alpha = KL3_KAPPA * 4/h^2 * max diag M / max |Phi_q row|^2 makes the penalty KL3_KAPPA times
- * the inertia in J whatever the step size and the units.
+ * alpha is a weight per row, alpha_k = KL3_KAPPA * 4/h^2 * max diag M / scale_k^2 with scale_k the
+ * row's unit (its norm at the start of the run, the watch's kl_row_scales): the penalty is KL3_KAPPA
+ * times the inertia in J for every row, whatever the step size and the units of each constraint
+ * (one weight for all, by the largest row, left a row in small units nearly unpenalized).
  *
  * Error control: the local error of the trapezoidal rule in q is -h^3/12 q''' ~ -h^2/12 (a - a0);
  * its weighted RMS norm with weights 1 / (atol + rtol |q|) must be <= 1. */
@@ -47,7 +49,8 @@ typedef struct {
     const double *p;
     double *pext;   /* [p (P), a (m), nu (r)]: the inputs of the tangent kernel */
     int n_parameters;
-    double rtol, atol, mass_scale, constraint_scale;
+    double rtol, atol, mass_scale;
+    double weight[KL3_R + 1];   /* 1 / scale_k^2: the rows' penalty weights */
     double terms[KRONLAG_DYNAMICS_SIZE + 1], tangent[KRONLAG_TANGENT_SIZE + 1];
     double J[KL3_M * KL3_M];
     int pivots[KL3_M];
@@ -76,13 +79,13 @@ static double kl3_norm(const double *e, const double *q0, const double *q1, cons
     return sqrt(sum / KL3_M);
 }
 
-/* x = J^-1 (c Phi_q^T r) with the current factors: the penalty projection of a constraint
- * residual r (r entries). */
+/* x = J^-1 (c Phi_q^T W r) with the current factors (W: the rows' weights): the penalty projection of
+ * a constraint residual r (r entries). */
 static void kl3_project(kl3_state *s, const double *Phi_q, const double *r, double c, double *x)
 {
     for (int i = 0; i < KL3_M; ++i) {
         double sum = 0.0;
-        for (int k = 0; k < KL3_R; ++k) sum += Phi_q[k * KL3_M + i] * r[k];
+        for (int k = 0; k < KL3_R; ++k) sum += Phi_q[k * KL3_M + i] * s->weight[k] * r[k];
         x[i] = c * sum;
     }
     lu_solve(s->J, KL3_M, s->pivots, x);
@@ -99,7 +102,7 @@ static int kl3_step(kl3_state *s, double t, double h, const double *q0, const do
     const double *Phi = s->terms + KRONLAG_DYNAMICS_PHI, *Phi_q = s->terms + KRONLAG_DYNAMICS_PHI_Q;
     const double *gamma = s->terms + KRONLAG_DYNAMICS_GAMMA;
     const double *K = s->tangent + KRONLAG_TANGENT_K, *D = s->tangent + KRONLAG_TANGENT_D;
-    double alpha = KL3_KAPPA * 4.0 / (h * h) * s->mass_scale / s->constraint_scale;
+    double alpha = KL3_KAPPA * 4.0 / (h * h) * s->mass_scale;  /* times weight[k] for row k */
     double c = h * h / 4.0, t1 = t + h;
     double *a = s->pext + s->n_parameters, *pnu = a + m;
     for (int i = 0; i < m; ++i) q1[i] = q0[i] + h * v0[i] + 0.5 * h * h * a0[i];
@@ -113,8 +116,8 @@ static int kl3_step(kl3_state *s, double t, double h, const double *q0, const do
         if (kl3_control(s, t1, q1, v1)) return s->stopped;
         kronlag_dynamics(t1, q1, v1, s->p, s->terms);
         for (int k = 0; k < r; ++k) {
-            if (iteration > 0) lamstar[k] += alpha * Phi[k];
-            nu[k] = lamstar[k] + alpha * Phi[k];
+            if (iteration > 0) lamstar[k] += alpha * s->weight[k] * Phi[k];
+            nu[k] = lamstar[k] + alpha * s->weight[k] * Phi[k];
         }
         for (int i = 0; i < m; ++i)
             if (!isfinite(a[i]) || !isfinite(v1[i])) return KRONLAG_RESULT_NEWTON_FAILED;
@@ -133,7 +136,7 @@ static int kl3_step(kl3_state *s, double t, double h, const double *q0, const do
         for (int i = 0; i < m; ++i)
             for (int j = 0; j < m; ++j) {
                 double penalty = 0.0;
-                for (int k = 0; k < r; ++k) penalty += Phi_q[k * m + i] * Phi_q[k * m + j];
+                for (int k = 0; k < r; ++k) penalty += Phi_q[k * m + i] * s->weight[k] * Phi_q[k * m + j];
                 s->J[i * m + j] = M[i * m + j] + 0.5 * h * D[i * m + j] + c * (K[i * m + j] + alpha * penalty);
             }
         ++s->jacobians;
@@ -293,19 +296,10 @@ int kronlag_index3(kronlag_options *o)
     kronlag_dynamics(t0, q, v, p, s.terms);
     s.mass_scale = 0.0;
     for (int i = 0; i < m; ++i) s.mass_scale = fmax(s.mass_scale, s.terms[KRONLAG_DYNAMICS_M + i * m + i]);
-    s.constraint_scale = 0.0;
-    for (int k = 0; k < r; ++k) {
-        double sum = 0.0;
-        for (int i = 0; i < m; ++i) {
-            double entry = s.terms[KRONLAG_DYNAMICS_PHI_Q + k * m + i];
-            sum += entry * entry;
-        }
-        s.constraint_scale = fmax(s.constraint_scale, sum);
-    }
-    if (!(s.constraint_scale > 0.0)) s.constraint_scale = 1.0;
     kl_monitor monitor;
     kl_progress progress = {kl_clock()};
-    kl_monitor_start(&monitor, t0, q, s.terms + KRONLAG_DYNAMICS_PHI_Q, o->events, o->max_events);
+    kl_monitor_start(&monitor, t0, q, s.terms + KRONLAG_DYNAMICS_PHI_Q, o->events, o->max_events, o->row_scale);
+    for (int k = 0; k < r; ++k) s.weight[k] = 1.0 / (monitor.scale[k] * monitor.scale[k]);
     int rows = 0, flag = KRONLAG_RESULT_SUCCESS, next = 0, retry = 0;
     int n_roots = kl_limit_count(o), rooted = 0;  /* limits: the watched functions at the step's start */
     double before[n_roots + 1], after[n_roots + 1];

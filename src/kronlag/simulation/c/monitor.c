@@ -1,7 +1,9 @@
 /* kronlag: the watch for singular configurations during an integration (policy: tolerances.py).
  *
- * At every accepted step, ratio = magnitude[rho - 1] / magnitude[0] of the pivoted QR of Phi_q^T
- * (rho: the generic rank, the rank at the start; redundant constraints lower it for good).  Near
+ * At every accepted step, ratio = magnitude[rho - 1] / magnitude[0] of the pivoted QR of Phi_q^T, each
+ * row divided by its norm at the start of the run (its unit: the ratio does not depend on the
+ * constraints' units; rho: the generic rank, the rank at the start; redundant constraints lower it
+ * for good).  Near
  * a singular configuration the ratio falls like |t - t*| and rises again.
  *
  * - approach: ratio < KRONLAG_APPROACH_RTOL.  The index-1 methods cannot be sure of their branch
@@ -20,24 +22,55 @@ typedef struct {
     int generic_rank, count, capacity, samples;
     double t[3], ratio[3], row[3];
     double q[3][KRONLAG_M];
+    double scale[KRONLAG_R + 1];       /* the constraint rows' units (kl_row_scales) */
     double *records;
 } kl_monitor;
 
-/* magnitude[rho - 1] / magnitude[0] of Phi_q (1 when there is nothing to lose) and its row. */
-static double kl_singular_ratio(const double *Phi_q, int generic_rank, int *row)
+/* The units of the constraint rows in the approach test (row_scales of tolerances.py): their norms in
+ * Phi_q; a row at most KRONLAG_RANK_RTOL times the largest gets the largest (1 if all are zero). */
+static void kl_row_scales(const double *Phi_q, double *scale)
 {
-    double magnitudes[KRONLAG_R + 1];
-    int perm[KRONLAG_R + 1];
+    double largest = 0.0;
+    for (int i = 0; i < KRONLAG_R; ++i) {
+        double sum = 0.0;
+        for (int j = 0; j < KRONLAG_M; ++j) sum += Phi_q[i * KRONLAG_M + j] * Phi_q[i * KRONLAG_M + j];
+        scale[i] = sqrt(sum);
+        largest = fmax(largest, scale[i]);
+    }
+    for (int i = 0; i < KRONLAG_R; ++i)
+        if (!(scale[i] > KRONLAG_RANK_RTOL * largest)) scale[i] = largest > 0.0 ? largest : 1.0;
+}
+
+/* magnitude[rho - 1] / magnitude[0] of Phi_q's rows divided by scale (1 when there is nothing to lose)
+ * and its row: singular_ratio of tolerances.py, step for step.  Of a rank deficient Phi_q only the
+ * generic_rank rows its own pivoted QR puts first (the independent ones, in their order) are kept. */
+static double kl_singular_ratio(const double *Phi_q, const double *scale, int generic_rank, int *row)
+{
+    double magnitudes[KRONLAG_R + 1], scaled[KRONLAG_R * KRONLAG_M + 1];
+    int perm[KRONLAG_R + 1], rows[KRONLAG_R + 1];
     *row = -1;
     if (KRONLAG_R == 0 || generic_rank == 0) return 1.0;
-    rank_magnitudes(Phi_q, KRONLAG_R, KRONLAG_M, magnitudes, perm);
-    *row = perm[generic_rank - 1];
+    if (generic_rank < KRONLAG_R) {
+        rank_magnitudes(Phi_q, KRONLAG_R, KRONLAG_M, magnitudes, perm);
+        for (int i = 0; i < generic_rank; ++i) {  /* perm[:rho], sorted (insertion) */
+            int j = i;
+            for (; j > 0 && rows[j - 1] > perm[i]; --j) rows[j] = rows[j - 1];
+            rows[j] = perm[i];
+        }
+    } else {
+        for (int i = 0; i < KRONLAG_R; ++i) rows[i] = i;
+    }
+    for (int i = 0; i < generic_rank; ++i)
+        for (int j = 0; j < KRONLAG_M; ++j) scaled[i * KRONLAG_M + j] = Phi_q[rows[i] * KRONLAG_M + j] / scale[rows[i]];
+    rank_magnitudes(scaled, generic_rank, KRONLAG_M, magnitudes, perm);
+    *row = rows[perm[generic_rank - 1]];
     return magnitudes[0] > 0.0 ? magnitudes[generic_rank - 1] / magnitudes[0] : 0.0;
 }
 
-/* Start watching at the initial Jacobian; records: room for capacity events. */
+/* Start watching at the initial Jacobian; records: room for capacity events; scale: the rows' units
+ * (kl_row_scales at the start of the run), or NULL for those of Phi_q here. */
 static void kl_monitor_start(kl_monitor *monitor, double t, const double *q, const double *Phi_q, double *records,
-                             int capacity)
+                             int capacity, const double *scale)
 {
     double magnitudes[KRONLAG_R + 1];
     int perm[KRONLAG_R + 1], row;
@@ -47,9 +80,11 @@ static void kl_monitor_start(kl_monitor *monitor, double t, const double *q, con
     if (KRONLAG_R > 0) {
         rank_magnitudes(Phi_q, KRONLAG_R, KRONLAG_M, magnitudes, perm);
         monitor->generic_rank = rank_of(magnitudes, KRONLAG_M < KRONLAG_R ? KRONLAG_M : KRONLAG_R);
+        if (scale) memcpy(monitor->scale, scale, KRONLAG_R * sizeof(double));
+        else kl_row_scales(Phi_q, monitor->scale);
     }
     monitor->t[2] = t;
-    monitor->ratio[2] = kl_singular_ratio(Phi_q, monitor->generic_rank, &row);
+    monitor->ratio[2] = kl_singular_ratio(Phi_q, monitor->scale, monitor->generic_rank, &row);
     monitor->row[2] = row;
     memcpy(monitor->q[2], q, sizeof monitor->q[2]);
     monitor->samples = 1;
@@ -76,7 +111,7 @@ static void kl_monitor_passage(kl_monitor *monitor)
 static double kl_monitor_observe(kl_monitor *monitor, double t, const double *q, const double *Phi_q)
 {
     int row;
-    double ratio = kl_singular_ratio(Phi_q, monitor->generic_rank, &row);
+    double ratio = kl_singular_ratio(Phi_q, monitor->scale, monitor->generic_rank, &row);
     for (int i = 0; i < 2; ++i) {
         monitor->t[i] = monitor->t[i + 1]; monitor->ratio[i] = monitor->ratio[i + 1];
         monitor->row[i] = monitor->row[i + 1];

@@ -11,6 +11,7 @@ from ...numeric.friction import friction_joints
 from ...numeric.tolerances import INDEX3_TIGHTEST
 from ..drivers import Segment, require, run, segment_status, solution_of
 from ..problem import MultibodyProblem, Solution, Solver, SolverOptions
+from ..stepping import approach_scales
 from .compiled import CompiledSolver
 
 if TYPE_CHECKING:
@@ -82,4 +83,5 @@ def index3_segment(problem: MultibodyProblem, options: SolverOptions, t0: float,
     a0 = np.zeros(m) if start is None else start.qdd
     lam0 = np.zeros(r) if start is None else start.lam
     scaled = options.scaled(Index3Solver.TOLERANCE_SCALE, INDEX3_TIGHTEST)
-    return run("index3", problem, scaled, t0, y0, a0=a0, lam0=lam0, handback=int(handback))
+    return run("index3", problem, scaled, t0, y0, a0=a0, lam0=lam0, handback=int(handback),
+               row_scale=approach_scales(problem))

@@ -11,7 +11,7 @@ from ...numeric import codegen
 from ...numeric.tolerances import CVODE_TIGHTEST
 from ..drivers import Segment, has_driver, require, run, segment_status, solution_of
 from ..problem import MultibodyProblem, Solution, Solver, SolverOptions
-from ..stepping import ApproachWatch
+from ..stepping import ApproachWatch, approach_scales
 from ..trajectory import Result
 
 if TYPE_CHECKING:
@@ -103,4 +103,4 @@ def cvode_segment(problem: MultibodyProblem, options: SolverOptions, t0: float, 
     scaled = options.scaled(CompiledSolver.TOLERANCE_SCALE, CVODE_TIGHTEST)
     # the outputs' projection no tighter than the floor either: |Phi| cannot be made smaller than rounding
     return run("cvode", problem, scaled, t0, y0, projection_tol=max(scaled.projection_tol, CVODE_TIGHTEST[1]),
-               alpha=problem.alpha, beta=problem.beta, **extra)
+               alpha=problem.alpha, beta=problem.beta, row_scale=approach_scales(problem), **extra)

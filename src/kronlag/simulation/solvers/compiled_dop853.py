@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from ..drivers import require, run
 from ..problem import MultibodyProblem, Solution, Solver
+from ..stepping import approach_scales
 from .baumgarte import BaumgarteSolver
 from .compiled import CompiledSolver, compiled_solution
 
@@ -39,5 +40,6 @@ class CompiledDOP853Solver(Solver):
     def solve(self, problem: MultibodyProblem) -> Solution:
         require(self, problem.model)
         segment = run("dop853", problem, self.options, problem.t0, problem.y0,
-                      projection_tol=self.options.projection_tol, alpha=problem.alpha, beta=problem.beta)
+                      projection_tol=self.options.projection_tol, alpha=problem.alpha, beta=problem.beta,
+                      row_scale=approach_scales(problem))
         return compiled_solution(problem, segment, "dop853")

@@ -12,7 +12,7 @@ from ...numeric.linalg import least_norm
 from ...numeric.tolerances import APPROACH_RTOL, numerical_rank, rank_magnitudes, singular_ratio
 from ..drivers import require
 from ..problem import MultibodyProblem, Solution, Solver, SolverOptions
-from ..stepping import Stepper, march
+from ..stepping import Stepper, approach_scales, march
 
 if TYPE_CHECKING:
     from ...numeric.numeric_model import NumericModel
@@ -30,6 +30,7 @@ class _IDAStepper(Stepper):
     def __init__(self, problem: MultibodyProblem, options: SolverOptions):
         self.problem, self.options, self.m = problem, options, problem.m
         self.nfev = self.njev = 0
+        self.scales = approach_scales(problem)
         self._start(problem.t0, problem.y0)
 
     def _start(self, t: float, y: np.ndarray) -> None:
@@ -73,7 +74,8 @@ class _IDAStepper(Stepper):
         if r == model.r:
             return False
         Phi_q = model.Phi_q(self.y[:self.m], self.t)
-        return singular_ratio(Phi_q[self.rows], r)[0] < APPROACH_RTOL <= singular_ratio(Phi_q, r)[0]
+        return (singular_ratio(Phi_q[self.rows], r, self.scales[self.rows])[0] < APPROACH_RTOL
+                <= singular_ratio(Phi_q, r, self.scales)[0])
 
     def _residual(self, t: float, x: np.ndarray, xp: np.ndarray, res: np.ndarray) -> None:
         """GGL residual: ``x = [q, v, lam, mu, eta]`` (2 m + 2 r + s,) over the independent rows."""
