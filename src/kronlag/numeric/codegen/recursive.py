@@ -28,6 +28,7 @@ absolute coordinates, a body added or replaced, hand-built Systems) keeps the fl
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -40,45 +41,27 @@ from ...core.kernels import Block, Kernel
 from ...model.frames import GROUND
 from ...model.symbols import free_symbols
 from ...model.system import System
+from ...model.trees import TreeDeclarationWarning
 from ..tolerances import TREE_AXIS_RTOL
+from .tree_links import Recursion, RecursionLink, declared_recursion
 
 if TYPE_CHECKING:
     from .source import KernelSource
 
-__all__ = ["TreeLink", "Recursion", "recursion_of", "dynamics_algorithm", "bias_forces", "mass_matrix",
+__all__ = ["RecursionLink", "Recursion", "recursion_of", "dynamics_algorithm", "bias_forces", "mass_matrix",
            "recursive_dynamics_kernel"]
 
 #: The joints the recursion moves along (one coordinate each); the readers merge fixed joints.
 RECURSIVE_JOINTS = ("revolute", "continuous", "prismatic")
 
 
-@dataclass(frozen=True)
-class TreeLink:
-    """A moving body of the tree: its name, joint kind, parent body (``"ground"``: the fixed root), its
-    frame in the parent body's frame (SymPy: ``origin``, ``rotation``, expressions of its coordinate),
-    the joint axis in its own frame, its coordinate's index and its inertial (mass, centre of mass in
-    its frame, central inertia tensor; ``None``: massless)."""
-
-    name: str
-    kind: str
-    parent: str
-    origin: sp.Matrix
-    rotation: sp.Matrix
-    axis: tuple[float, float, float]
-    index: int
-    inertial: tuple[sp.Expr, tuple[float, float, float], sp.Matrix] | None
-
-
-@dataclass(frozen=True)
-class Recursion:
-    """The tree of a qualifying System, parents before children (the reader's depth-first order)."""
-
-    links: tuple[TreeLink, ...]
-
-
 def recursion_of(system: System) -> tuple[Recursion | None, str]:
     """The tree the recursive kernels run on, or ``None`` with the reason the System keeps the flat
-    kernel (the second item: ``"recursive"`` or the reason in words)."""
+    kernel (the second item: ``"recursive"`` or the reason in words): the declared tree
+    (:meth:`~kronlag.System.add_tree_link`, checked against the bodies:
+    :func:`~kronlag.numeric.codegen.tree_links.declared_recursion`) or the robot reader's."""
+    if system.tree:
+        return declared_recursion(system)
     robot = getattr(system, "robot", None)
     if robot is None:
         return None, "not read from a robot file"
@@ -106,7 +89,7 @@ def recursion_of(system: System) -> tuple[Recursion | None, str]:
         step = robot.local_frames[joint.child][1]
         tree_body = robot.tree_bodies.get(joint.child)
         inertial = None if tree_body is None else (tree_body.body.mass, tree_body.centre, tree_body.body.inertia)
-        link = TreeLink(joint.child, joint.kind, parent, origin + rotation * sp.Matrix(step.origin),
+        link = RecursionLink(joint.child, joint.kind, parent, origin + rotation * sp.Matrix(step.origin),
                         rotation * sp.Matrix(step.rotation), joint.axis, index[joint.coordinate], inertial)
         if not _moves_as_joint(link, system.coordinates[link.index]):
             return None, f"the frame of link {link.name!r} does not move as its {joint.kind} joint {joint.name!r}"
@@ -124,7 +107,7 @@ def _in_body_frame(robot, link: str, body: str) -> tuple[sp.Matrix, sp.Matrix]:
     return origin, rotation
 
 
-def _moves_as_joint(link: TreeLink, coordinate: sp.Symbol, angle: float = 0.7) -> bool:
+def _moves_as_joint(link: RecursionLink, coordinate: sp.Symbol, angle: float = 0.7) -> bool:
     """Whether the link's frame turns about its unit axis (revolute) or slides along it (prismatic) as
     its coordinate goes from 0 to ``angle``: what the recursion assumes of every joint."""
     variable = se.Symbol(coordinate.name)
@@ -267,7 +250,7 @@ def bias_forces(recursion: Recursion, frames: list[_Frame], gravity: Vector, def
             continue
         mass, centre, inertia = link.inertial
         m = convert(mass)
-        c = [_number(x) for x in centre]
+        c = [_entry(x, convert) for x in centre]
         tensor = [[convert(inertia[i, j]) for j in range(3)] for i in range(3)]
         w, dw = omega[k], alpha[k]
         centre_acceleration = _add(accel[k], _cross(dw, c), _cross(w, define.vector(_cross(w, c))))
@@ -301,7 +284,7 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
             continue
         m_sym, centre, inertia = link.inertial
         m = convert(m_sym)
-        c = [_number(x) for x in centre]
+        c = [_entry(x, convert) for x in centre]
         mass[k], first[k] = m, _scaled(m, c)
         squared = _dot(c, c)
         about_origin[k] = [[convert(inertia[i, j]) + m * ((squared if i == j else zero) - c[i] * c[j])
@@ -393,6 +376,11 @@ class _InputConverter:
         return result
 
 
+def _entry(value, convert: Callable[[sp.Expr], se.Basic]) -> se.Basic:
+    """A number of a robot file (:func:`_number`) or an expression of a declared tree."""
+    return _number(value) if isinstance(value, int | float) else convert(value)
+
+
 def _number(value: float) -> se.Basic:
     """A number of the file: an integer exactly, else a double."""
     return se.Integer(int(value)) if float(value).is_integer() else se.RealDouble(float(value))
@@ -406,8 +394,11 @@ def recursive_dynamics_kernel(source: KernelSource, blocks: Sequence[Block]) -> 
     ``M`` and ``h`` computed recursively, or ``None`` when its System does not qualify
     (:func:`recursion_of`).  ``blocks`` are the kernel's blocks, ``M`` and ``h`` first."""
     system = source.equations.system
-    recursion, _ = recursion_of(system)
+    recursion, reason = recursion_of(system)
     if recursion is None:
+        if system.tree:
+            warnings.warn(f"system {system.name!r}: the declared kinematic tree is not used ({reason}); "
+                          "M and h come from the flat derivation", TreeDeclarationWarning, stacklevel=2)
         return None
     assert [block.name for block in blocks[:2]] == ["M", "h"], "the dynamics kernel starts with M and h"
     m = source.m
@@ -416,6 +407,7 @@ def recursive_dynamics_kernel(source: KernelSource, blocks: Sequence[Block]) -> 
     frames = _frames(recursion, convert, source.qd, define)
     zero = se.Integer(0)
     gravity = [convert(x) for x in system.gravity] if system.gravity is not None else [zero] * 3
+    gravity += [zero] * (3 - len(gravity))  # a planar tree's gravity in its plane
     bias = bias_forces(recursion, frames, gravity, define, convert)
     by_link = mass_matrix(recursion, frames, define, convert)
     order = [link.index for link in recursion.links]
