@@ -43,6 +43,7 @@ from ...model.symbols import free_symbols
 from ...model.system import System
 from ...model.trees import TreeDeclarationWarning
 from ..tolerances import TREE_AXIS_RTOL
+from .constraint_terms import chained_sums, constraint_blocks
 from .tree_links import Recursion, RecursionLink, declared_recursion
 
 if TYPE_CHECKING:
@@ -422,10 +423,12 @@ def recursive_dynamics_kernel(source: KernelSource, blocks: Sequence[Block]) -> 
     forces = source.matrix("f_Q")
     h = [[forces[i][0] - velocity_and_gravity[i] - (se.diff(loads, source.q[i]) if loads != zero else zero)]
          for i in range(m)]
-    matrices = [mass, h, *(source.matrix(block.name) for block in blocks[2:])]
+    constraints = constraint_blocks(source)
+    matrices = [mass, h, *(constraints.get(block.name) or source.matrix(block.name) for block in blocks[2:])]
     entries = [entry for rows in matrices for row in rows for entry in row]
-    definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs]
-    temporaries, outputs = _eliminated(definitions, entries)
+    sums, constraint_entries = chained_sums(entries[m * m + m:])
+    definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs] + sums
+    temporaries, outputs = _eliminated(definitions, entries[:m * m + m] + constraint_entries)
     return Kernel("dynamics", tuple(blocks), temporaries, outputs, dict(source.convert.constants))
 
 

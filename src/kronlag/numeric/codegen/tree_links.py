@@ -20,6 +20,7 @@ import numpy as np
 import symengine as se
 import sympy as sp
 
+from ...core.kernels import ExpressionConverter
 from ...model.bodies import PlanarBody, PointMass, RigidBody
 from ...model.frames import GROUND
 from ...model.symbols import free_symbols
@@ -93,8 +94,15 @@ def _joint_motion(link: TreeLink) -> tuple[sp.Matrix, sp.Matrix]:
     if link.joint == "prismatic":
         return sp.Matrix(link.origin) + sp.Matrix(link.rotation) * axis * q, sp.Matrix(link.rotation)
     cross = sp.Matrix([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    turn = sp.eye(3) + sp.sin(q) * cross + (1 - sp.cos(q)) * cross * cross
-    return sp.Matrix(link.origin), sp.Matrix(link.rotation) * turn
+    c, s = sp.cos(q), sp.sin(q)
+    # R = cos(q) I + sin(q) [a]x + (1 - cos(q)) a a^T, only the nonzero terms (SymPy arithmetic is slow)
+    turn = sp.Matrix(3, 3, lambda i, j: sp.Add(*(
+        ([c] if i == j else []) + ([cross[i, j] * s] if cross[i, j] != 0 else [])
+        + ([axis[i] * axis[j] * (1 - c)] if axis[i] * axis[j] != 0 else []))))
+    if link.rotation == sp.eye(3):
+        return sp.Matrix(link.origin), turn
+    return sp.Matrix(link.origin), sp.Matrix(3, 3, lambda i, j: sp.Add(*(link.rotation[i, k] * turn[k, j]
+                                                                        for k in range(3))))
 
 
 def _inertial(body, link: TreeLink) -> tuple[sp.Expr, tuple, sp.Matrix]:
@@ -113,21 +121,25 @@ def _misplaced_body(system: System, links: tuple[RecursionLink, ...], bodies: di
     """The reason the composed links do not place some body as its own expressions do (centre of
     mass, orientation) at :data:`POSE_CHECK_STATES` random states, or ``None``."""
     symbols = [*system.coordinates, *system.parameters]
-    names = [link.name for link in links]
+    convert = ExpressionConverter({symbol: se.Symbol(symbol.name) for symbol in symbols})
     local = [entry for link in links for entry in (*link.origin, *link.rotation)]
     own = []
-    for name in names:
-        frame = bodies[name].pose().frame
+    for link in links:
+        frame = bodies[link.name].pose().frame
         own += [*frame.origin, *frame.rotation]
-    evaluate = se.Lambdify([se.Symbol(s.name) for s in symbols], [se.sympify(e) for e in (*local, *own)])
-    centres = se.Lambdify([se.Symbol(s.name) for s in system.parameters],
-                          [se.sympify(x) for link in links for x in link.inertial[1]] or [se.Integer(0)])
+    centre = [x for link in links for x in link.inertial[1]]
+    entries = [convert(sp.sympify(entry)) for entry in (*local, *own, *centre)]
+    if convert.constants:  # numbers too large for an exact fraction: their values
+        values = {se.Symbol(name): se.RealDouble(value) for name, value in convert.constants.items()}
+        entries = [entry.xreplace(values) for entry in entries]
+    evaluate = se.Lambdify([se.Symbol(symbol.name) for symbol in symbols], entries, backend="lambda")
     rng = np.random.default_rng(19)
     for _ in range(POSE_CHECK_STATES):
         q = rng.uniform(-np.pi, np.pi, len(system.coordinates))
         parameters = rng.uniform(0.5, 1.5, len(system.parameters))
         values = np.asarray(evaluate(np.concatenate([q, parameters])), dtype=float).ravel()
-        centre = np.asarray(centres(parameters), dtype=float).ravel()
+        centre = values[-3 * len(links):]
+        values = values[:-3 * len(links)]
         frames: dict[str, tuple[np.ndarray, np.ndarray]] = {GROUND: (np.zeros(3), np.eye(3))}
         offset = 12 * len(links)
         scale = 1.0 + max(float(np.max(np.abs(values[offset:]))), float(np.max(np.abs(centre), initial=0.0)))
