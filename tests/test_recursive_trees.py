@@ -15,6 +15,7 @@ from test_recursive_kernels import assert_same_dynamics, operations
 import kronlag
 from kronlag import models
 from kronlag.core.errors import ModelError
+from kronlag.core.kernels import SCALAR_NAMESPACE, cse_kernel, python_functions, python_source
 from kronlag.model.bodies import PlanarBody
 from kronlag.model.trees import TreeDeclarationWarning
 from kronlag.numeric.codegen import KernelSource
@@ -213,3 +214,23 @@ def test_malformed_declarations_raise_at_once():
         system.add_tree_link("link 2", q2, parent="link 1", joint="ball")
     with pytest.raises(ModelError, match="may not depend on the coordinates"):
         system.add_tree_link("link 2", q2, parent="link 1", origin=(q1, 0))
+
+
+@pytest.mark.parametrize("system", [models.closed_chain(6, "relative"), cart_pole()], ids=["chain", "cart_pole"])
+def test_structure_keeping_kernels_compiled_with_the_model(system):
+    """g (recursive, with the loads' potentials), Phi_q and gamma (from Phi along the motion) equal the
+    derivation's flat matrices."""
+    equations = kronlag.derive(system)
+    source = KernelSource(equations)
+    rng = np.random.default_rng(7)
+    m = equations.shape[0]
+    for name in ("g", "Phi_q", "gamma"):
+        ours = source.kernel(name)
+        flat = cse_kernel(name, ours.blocks, [source.matrix(name)], source.convert.constants)
+        assert ours != flat or not ours.outputs  # the structure-keeping form (a cart-pole has no Phi)
+        functions = [python_functions(python_source(kernel), [name], SCALAR_NAMESPACE)[name] for kernel in (ours, flat)]
+        for _ in range(3):
+            q, qd = rng.uniform(-2, 2, m).tolist(), rng.uniform(-2, 2, m).tolist()
+            p = rng.uniform(0.5, 1.5, len(equations.parameters)).tolist()
+            mine, theirs = (np.array(function(0.0, q, qd, p)) for function in functions)
+            assert np.abs(mine - theirs).max(initial=0) <= 1e-12 * max(1.0, np.abs(theirs).max(initial=0))

@@ -29,6 +29,7 @@ absolute coordinates, a body added or replaced, hand-built Systems) keeps the fl
 from __future__ import annotations
 
 import warnings
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -50,7 +51,7 @@ if TYPE_CHECKING:
     from .source import KernelSource
 
 __all__ = ["RecursionLink", "Recursion", "recursion_of", "dynamics_algorithm", "bias_forces", "mass_matrix",
-           "recursive_dynamics_kernel"]
+           "recursive_kernel", "RECURSIVE_KERNELS"]
 
 #: The joints the recursion moves along (one coordinate each); the readers merge fixed joints.
 RECURSIVE_JOINTS = ("revolute", "continuous", "prismatic")
@@ -390,46 +391,70 @@ def _number(value: float) -> se.Basic:
 # -- the kernel ------------------------------------------------------------------------------------
 
 
-def recursive_dynamics_kernel(source: KernelSource, blocks: Sequence[Block]) -> Kernel | None:
-    """The ``"dynamics"`` kernel of ``source`` (a :class:`~kronlag.numeric.codegen.KernelSource`) with
-    ``M`` and ``h`` computed recursively, or ``None`` when its System does not qualify
-    (:func:`recursion_of`).  ``blocks`` are the kernel's blocks, ``M`` and ``h`` first."""
+#: The kernels written here for a qualifying System (:func:`recursive_kernel`): the forward dynamics,
+#: and the compiled-with-the-model kernels whose flat forms grow fastest (``g``: n^2 terms in relative
+#: angles; ``Phi_q``, ``gamma``: :mod:`~kronlag.numeric.codegen.constraint_terms`).
+RECURSIVE_KERNELS = ("dynamics", "g", "Phi_q", "gamma")
+
+#: The recursion of each KernelSource's System, found once (the declared tree's check evaluates poses).
+_RECURSIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _recursion(source: KernelSource) -> tuple[Recursion | None, str]:
+    found = _RECURSIONS.get(source)
+    if found is None:
+        found = _RECURSIONS[source] = recursion_of(source.equations.system)
+    return found
+
+
+def recursive_kernel(source: KernelSource, name: str, blocks: Sequence[Block]) -> Kernel | None:
+    """Kernel ``name`` of :data:`RECURSIVE_KERNELS` of ``source`` (a
+    :class:`~kronlag.numeric.codegen.KernelSource`) written structure-keeping, or ``None`` when its
+    System does not qualify (:func:`recursion_of`; a declared tree that fails its check warns once,
+    with the ``"dynamics"`` kernel).  ``blocks`` are the kernel's blocks (``M`` and ``h`` first for
+    ``"dynamics"``)."""
     system = source.equations.system
-    recursion, reason = recursion_of(system)
+    recursion, reason = _recursion(source)
     if recursion is None:
-        if system.tree:
+        if system.tree and name == "dynamics":
             warnings.warn(f"system {system.name!r}: the declared kinematic tree is not used ({reason}); "
-                          "M and h come from the flat derivation", TreeDeclarationWarning, stacklevel=2)
+                          "M and h come from the flat derivation", TreeDeclarationWarning, stacklevel=3)
         return None
-    assert [block.name for block in blocks[:2]] == ["M", "h"], "the dynamics kernel starts with M and h"
+    if name in ("Phi_q", "gamma"):
+        sums, outputs = chained_sums([entry for row in constraint_blocks(source)[name] for entry in row])
+        temporaries, outputs = _eliminated(sums, outputs)
+        return Kernel(name, tuple(blocks), temporaries, outputs, dict(source.convert.constants))
     m = source.m
+    zero = se.Integer(0)
     convert = _InputConverter(source)
     define = _Definitions()
-    frames = _frames(recursion, convert, source.qd, define)
-    zero = se.Integer(0)
+    frames = _frames(recursion, convert, source.qd if name == "dynamics" else [zero] * m, define)
     gravity = [convert(x) for x in system.gravity] if system.gravity is not None else [zero] * 3
     gravity += [zero] * (3 - len(gravity))  # a planar tree's gravity in its plane
-    bias = bias_forces(recursion, frames, gravity, define, convert)
-    by_link = mass_matrix(recursion, frames, define, convert)
     order = [link.index for link in recursion.links]
-    mass = [[zero] * m for _ in range(m)]
-    velocity_and_gravity = [zero] * m
-    for a, row, entry in zip(order, by_link, bias):
-        velocity_and_gravity[a] = convert.exact(entry)
-        for b, value in zip(order, row):
-            mass[a][b] = convert.exact(value)
+    bias = [zero] * m  # C qd + g, or g alone at qd = 0
+    for a, entry in zip(order, bias_forces(recursion, frames, gravity, define, convert)):
+        bias[a] = convert.exact(entry)
     potential = sp.Add(*(load.potential() for load in system.loads))
     loads = source.convert(potential) if potential != 0 else zero
-    forces = source.matrix("f_Q")
-    h = [[forces[i][0] - velocity_and_gravity[i] - (se.diff(loads, source.q[i]) if loads != zero else zero)]
-         for i in range(m)]
-    constraints = constraint_blocks(source)
-    matrices = [mass, h, *(constraints.get(block.name) or source.matrix(block.name) for block in blocks[2:])]
-    entries = [entry for rows in matrices for row in rows for entry in row]
-    sums, constraint_entries = chained_sums(entries[m * m + m:])
-    definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs] + sums
-    temporaries, outputs = _eliminated(definitions, entries[:m * m + m] + constraint_entries)
-    return Kernel("dynamics", tuple(blocks), temporaries, outputs, dict(source.convert.constants))
+    load_gradient = [se.diff(loads, q) if loads != zero else zero for q in source.q]
+    if name == "g":
+        entries = [value + slope for value, slope in zip(bias, load_gradient)]
+    else:
+        assert [block.name for block in blocks[:2]] == ["M", "h"], "the dynamics kernel starts with M and h"
+        mass = [[zero] * m for _ in range(m)]
+        for a, row in zip(order, mass_matrix(recursion, frames, define, convert)):
+            for b, value in zip(order, row):
+                mass[a][b] = convert.exact(value)
+        forces = source.matrix("f_Q")
+        h = [[forces[i][0] - bias[i] - load_gradient[i]] for i in range(m)]
+        constraints = constraint_blocks(source)
+        others = [constraints.get(block.name) or source.matrix(block.name) for block in blocks[2:]]
+        sums, constraint_entries = chained_sums([entry for rows in others for row in rows for entry in row])
+        entries = [entry for rows in (mass, h) for row in rows for entry in row] + constraint_entries
+    definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs] + (sums if name == "dynamics" else [])
+    temporaries, outputs = _eliminated(definitions, entries)
+    return Kernel(name, tuple(blocks), temporaries, outputs, dict(source.convert.constants))
 
 
 def _eliminated(definitions: list[tuple[se.Symbol, se.Basic]], outputs: list[se.Basic]
