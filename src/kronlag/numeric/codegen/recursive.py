@@ -1,11 +1,12 @@
-"""Recursive, structure-keeping ``M`` and ``h`` of the ``"dynamics"`` kernel for robot trees.
+"""Recursive, structure-keeping ``M`` and ``h`` of the ``"dynamics"`` kernel for kinematic trees.
 
 The derivation (:mod:`kronlag.symbolic.derivation`) writes every body's pose as a flat expression of
 all the coordinates above it, so the kernel cannot reuse a parent's rotation, velocity or
-acceleration the way a recursive algorithm does.  For a System read from a robot file in joint
-coordinates (:func:`recursion_of` says which qualify) this module writes the two blocks the way
-Pinocchio computes them, in each body's own frame, every intermediate quantity a fresh symbol
-defined once (a temporary of the kernel), so that nothing is expanded across the tree:
+acceleration the way a recursive algorithm does.  For a System that is a tree in joint coordinates
+(:func:`recursion_of` says which qualify: read from a robot file, or with a declared tree,
+:meth:`kronlag.System.add_tree_link`) this module writes the two blocks the way Pinocchio computes
+them, in each body's own frame, every intermediate quantity a fresh symbol defined once (a
+temporary of the kernel), so that nothing is expanded across the tree:
 
 * ``C qd + g`` by the recursive Newton-Euler algorithm with ``qdd = 0`` and the base accelerating
   at ``-gravity`` (Luh, Walker and Paul 1980): angular velocities and accelerations and the
@@ -16,14 +17,18 @@ defined once (a temporary of the kernel), so that nothing is expanded across the
   joint carried inward to every joint above it.
 
 ``h = f_Q - (C qd + g) - d(V_loads)/dq`` with the generalized forces ``f_Q`` and the potentials of
-the loads read from the derivation.  The other blocks of the kernel (``Phi``, ``Phi_q``, ``gamma``,
-...) are the derivation's; one ``symengine.cse`` runs over the definitions and all the blocks.
+the loads read from the derivation.  ``Phi_q`` and ``gamma`` are differentiated from ``Phi``
+without expanding it (:mod:`~kronlag.numeric.codegen.constraint_terms`); the other blocks (``Phi``,
+``A``, ...) are the derivation's; one ``symengine.cse`` runs over the definitions and all the
+blocks.  The kernels ``g``, ``Phi_q`` and ``gamma`` compiled with the model are written the same way
+(:data:`RECURSIVE_KERNELS`).
 
-A System qualifies when it is exactly what the reader made (:attr:`RobotDescription.tree_bodies`,
+A robot System qualifies when it is exactly what the reader made (:attr:`RobotDescription.tree_bodies`,
 the System's bodies those very objects), in joint coordinates, with a fixed base and revolute,
-continuous or prismatic joints only; any other System (floating, ball, planar or universal joints,
-absolute coordinates, a body added or replaced, hand-built Systems) keeps the flat kernel:
-:func:`recursion_of` returns the reason, and :func:`dynamics_algorithm` names the choice.
+continuous or prismatic joints only; a System with a declared tree when the declaration passes
+:func:`~kronlag.numeric.codegen.tree_links.declared_recursion` (every body in it, placed as its own
+expressions say).  Any other System keeps the flat kernel: :func:`recursion_of` returns the reason,
+and :func:`dynamics_algorithm` names the choice.
 """
 
 from __future__ import annotations

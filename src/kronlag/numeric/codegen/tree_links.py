@@ -155,8 +155,8 @@ def _misplaced_body(system: System, links: tuple[RecursionLink, ...], bodies: di
             offset += d + d * d
             position = world_origin + world_rotation @ centre[3 * k:3 * k + 3]
             if np.max(np.abs(position[:d] - body_position)) > TREE_POSE_RTOL * scale:
-                return (f"the declared tree places body {link.name!r}'s centre of mass at {position[:d]} where "
-                        f"the body is at {body_position} (q = {np.round(q, 3)})")
+                return (f"the declared tree places the centre of mass of body {link.name!r} at {position[:d]} "
+                        f"where the body has it at {body_position} (q = {np.round(q, 3)})")
             if isinstance(bodies[link.name], PointMass):
                 continue
             if np.max(np.abs(world_rotation[:d, :d] - body_rotation)) > TREE_POSE_RTOL or (
