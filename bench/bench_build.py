@@ -25,6 +25,8 @@ directory):
   gamma, ...), *CSE* of the forward-dynamics kernel (``symengine.cse``, or ``linear_cse``
   above ``LINEAR_CSE_OUTPUTS`` outputs: the method is printed), *C text* (printing the source)
   and *compilation* (the C compiler on the parts of the source in parallel, a cache emptied again);
+* each kernel compiled with the model (``"dynamics"`` and the small ones its library holds; with
+  ``--tangent`` also ALI3-P's ``"tangent"``): its construction time and the size of its C text;
 * ``eom.numeric(parameters, backend="python")`` for comparison (up to n = 20);
 * with ``--compare-cse``: ``sympy.cse`` against ``symengine.cse`` on the mass
   matrix alone (``sympy.cse`` of the whole kernel takes minutes).
@@ -53,7 +55,7 @@ FIRST_SIMULATE_TARGET_S = 1.0
 PYTHON_BACKEND_MAX_N = 20
 
 
-def measure(n: int, angles: str, compare_cse: bool) -> dict:
+def measure(n: int, angles: str, compare_cse: bool, with_tangent: bool = False) -> dict:
     """One case, in this process (called in a fresh subprocess with an empty cache)."""
     import symengine as se
     import sympy as sp
@@ -112,6 +114,18 @@ def measure(n: int, angles: str, compare_cse: bool) -> dict:
     result["cse_method"] = "linear_cse" if outputs > LINEAR_CSE_OUTPUTS else "symengine.cse"
     result.update(phases=phases, temporaries=len(kernel.temporaries), source_kb=len(library.source) / 1024,
                   kernel_kb=len(text) / 1024, parts=codegen.library_parts(library.source))
+    # what the model's library is made of: each kernel compiled with it, its construction time
+    # (conversion + CSE, the recursion's check once) and its C text
+    from kronlag.numeric.numeric_model import _LIBRARY_GROUPS
+
+    fresh_source = codegen.KernelSource(eom)
+    kernels = {}
+    for name in _LIBRARY_GROUPS["dynamics"] + (("tangent",) if with_tangent else ()):
+        start = time.perf_counter()
+        built = fresh_source.kernel(name)
+        made = time.perf_counter() - start
+        kernels[name] = (made, len(codegen.c_kernel(built, 0)[0]) / 1024)
+    result["kernels"] = kernels
     if n <= PYTHON_BACKEND_MAX_N:
         start = time.perf_counter()
         eom.numeric(values, backend="python")
@@ -133,13 +147,15 @@ def main() -> None:
     parser.add_argument("--n", type=int, nargs="+", help="numbers of links (both conventions each); "
                         "default: the target cases")
     parser.add_argument("--compare-cse", action="store_true", help="also time sympy.cse on M")
+    parser.add_argument("--tangent", action="store_true",
+                        help="also build the tangent kernel (ALI3-P's, compiled when a run needs it)")
     parser.add_argument("--case", nargs=2, help=argparse.SUPPRESS)
     parser.add_argument("--quick", action="store_true", help="smoke test: n = 8, both conventions")
     add_arguments(parser)
     arguments = parser.parse_args()
     if arguments.case:
         n, angles = int(arguments.case[0]), arguments.case[1]
-        print(json.dumps(measure(n, angles, arguments.compare_cse)))
+        print(json.dumps(measure(n, angles, arguments.compare_cse, arguments.tangent)))
         return
     record = Record("bench_build", arguments)
     sizes = [8] if arguments.quick and not arguments.n else arguments.n
@@ -152,6 +168,8 @@ def main() -> None:
             command = [sys.executable, SCRIPT, "--case", str(n), angles]
             if arguments.compare_cse:
                 command.append("--compare-cse")
+            if arguments.tangent:
+                command.append("--tangent")
             output = subprocess.run(command, capture_output=True, text=True, check=True,
                                     env={**os.environ, "KRONLAG_CACHE": cache}).stdout
         r = json.loads(output.strip().splitlines()[-1])
@@ -169,6 +187,9 @@ def main() -> None:
               f"{'ok' if r['first_simulate'] <= FIRST_SIMULATE_TARGET_S else 'OVER'})")
         for phase, seconds in r["phases"].items():
             print(f"    {phase:30s} {seconds:7.2f} s")
+        print("  the model's kernels: construction (conversion, CSE) and C text")
+        for name, (seconds, kib) in r["kernels"].items():
+            print(f"    {name:30s} {seconds:7.2f} s {kib:8.0f} KiB")
         if "numeric_python" in r:
             print(f"  eom.numeric(backend='python')     {r['numeric_python']:7.2f} s  (after derive)")
         if arguments.compare_cse:

@@ -321,24 +321,38 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
                     - r[i] * moved[j] - moved[i] * r[j]
                 about_origin[p][i][j] = about_origin[p][i][j] + rotated + shift
                 about_origin[p][j][i] = about_origin[p][i][j]
+    # each link's frame in the world (rotation, origin), its joint axis s and the axis' moment o x s there
+    world: list[tuple[list[list[se.Basic]], Vector, Vector, Vector]] = []
+    for frame in frames:
+        if frame.parent is None:
+            rotation, origin = frame.rotation, frame.origin
+        else:
+            parent_rotation, parent_origin = world[frame.parent][:2]
+            rotation = [[define(se.Add(*(parent_rotation[i][a] * frame.rotation[a][j] for a in range(3))))
+                         for j in range(3)] for i in range(3)]
+            origin = define.vector(_add(parent_origin, _apply(parent_rotation, frame.origin)))
+        axis = define.vector(_apply(rotation, frame.axis))
+        world.append((rotation, origin, axis, define.vector(_cross(origin, axis))))
+    # M[k][j] for j = k and its ancestors: the world momentum (linear L, angular A about the world origin)
+    # of a unit speed of joint k, projected on joint j's axis line: s . A + (o x s) . L, or s . L for a slide
     result = [[zero] * n for _ in range(n)]
     for k, frame in enumerate(frames):
         s = frame.axis
         if frame.revolute:  # momentum of a unit turn about the axis through the origin
-            linear = define.vector(_cross(s, first[k]))
-            angular = define.vector(_apply(about_origin[k], s))
+            linear = _cross(s, first[k])
+            angular = _apply(about_origin[k], s)
         else:  # of a unit slide along the axis
-            linear = define.vector(_scaled(mass[k], s))
-            angular = define.vector(_cross(first[k], s))
-        j = k
-        while True:
-            joint = frames[j]
-            result[k][j] = result[j][k] = define(_dot(joint.axis, angular if joint.revolute else linear))
-            if joint.parent is None:
-                break
-            linear_up = define.vector(_apply(joint.rotation, linear))
-            angular = define.vector(_add(_apply(joint.rotation, angular), _cross(joint.origin, linear_up)))
-            linear, j = linear_up, joint.parent
+            linear = _scaled(mass[k], s)
+            angular = _cross(first[k], s)
+        rotation, origin = world[k][:2]
+        momentum = define.vector(_apply(rotation, define.vector(linear)))
+        moment = define.vector(_add(_apply(rotation, define.vector(angular)), _cross(origin, momentum)))
+        j: int | None = k
+        while j is not None:
+            _, _, axis, axis_moment = world[j]
+            value = _dot(axis, moment) + _dot(axis_moment, momentum) if frames[j].revolute else _dot(axis, momentum)
+            result[k][j] = result[j][k] = define(value)
+            j = frames[j].parent
     return result
 
 
