@@ -22,8 +22,10 @@ directory):
   it compiles on top (target 1 s);
 * the same work again, split into its phases: *derivation*, *conversion*
   (SymPy -> SymEngine of M, h = f_Q - C qd - g, Phi, Phi_q, the time derivatives
-  gamma, ...), *CSE* of the forward-dynamics kernel (``symengine.cse``, or ``linear_cse``
-  above ``LINEAR_CSE_OUTPUTS`` outputs: the method is printed), *C text* (printing the source)
+  gamma, ...; with recursive kernels only the blocks read off the derivation), *CSE* of the
+  forward-dynamics kernel (``symengine.cse``, or ``linear_cse`` above ``LINEAR_CSE_OUTPUTS``
+  outputs: the method is printed; with recursive kernels the tree's check and the recursion
+  too), *C text* (printing the source)
   and *compilation* (the C compiler on the parts of the source in parallel, a cache emptied again);
 * each kernel compiled with the model (``"dynamics"`` and the small ones its library holds; with
   ``--tangent`` also ALI3-P's ``"tangent"``): its construction time and the size of its C text;
@@ -61,6 +63,7 @@ def measure(n: int, angles: str, compare_cse: bool, with_tangent: bool = False) 
     import sympy as sp
 
     from kronlag import codegen, derive, models
+    from kronlag.numeric.codegen.recursive import dynamics_algorithm
 
     import resource
 
@@ -94,7 +97,10 @@ def measure(n: int, angles: str, compare_cse: bool, with_tangent: bool = False) 
     phases["derivation"] = time.perf_counter() - start
     start = time.perf_counter()
     source = codegen.KernelSource(eom)
-    for block in codegen.LAYOUTS["dynamics"]:
+    algorithm = dynamics_algorithm(eom.system)
+    # the blocks the dynamics kernel reads off the derivation (a recursive kernel computes M, h, Phi_q, gamma)
+    read = codegen.LAYOUTS["dynamics"] if algorithm != "recursive" else ("f_Q", "Phi", "Phi_t", "A", "b", "gamma_nh")
+    for block in read:
         source.matrix(block)
     phases["conversion"] = time.perf_counter() - start
     start = time.perf_counter()
@@ -111,6 +117,7 @@ def measure(n: int, angles: str, compare_cse: bool, with_tangent: bool = False) 
     from kronlag.core.kernels import LINEAR_CSE_OUTPUTS
 
     outputs = sum(block.size for block in kernel.blocks)
+    result["algorithm"] = algorithm
     result["cse_method"] = "linear_cse" if outputs > LINEAR_CSE_OUTPUTS else "symengine.cse"
     result.update(phases=phases, temporaries=len(kernel.temporaries), source_kb=len(library.source) / 1024,
                   kernel_kb=len(text) / 1024, parts=codegen.library_parts(library.source))
@@ -175,7 +182,8 @@ def main() -> None:
         r = json.loads(output.strip().splitlines()[-1])
         target = TARGETS_S.get((n, angles))
         verdict = "" if target is None else f"  (target {target:.0f} s: {'ok' if r['total'] <= target else 'OVER'})"
-        print(f"\nclosed_chain({n}, {angles!r}): {r['cse_method']}, {r['temporaries']} temporaries, {r['kernel_kb']:.0f} KiB of kernel C "
+        print(f"\nclosed_chain({n}, {angles!r}): {r['algorithm']} M and h, {r['cse_method']}, "
+              f"{r['temporaries']} temporaries, {r['kernel_kb']:.0f} KiB of kernel C "
               f"({r['source_kb']:.0f} KiB with the solver), compiled in {r['parts']} parallel parts")
         print(f"  derive + eom.numeric(backend='c')  {r['total']:7.2f} s{verdict}  (load {os.getloadavg()[0]:.1f})")
         print(f"  CPU: Python {r['python_cpu']:.2f} s, compilers {r['compiler_cpu']:.2f} s (at least "

@@ -63,10 +63,12 @@ def test_two_link_chain_against_its_closed_form():
     for _ in range(3):
         (q1, q2), (u1, u2) = rng.uniform(-2, 2, 2), rng.uniform(-2, 2, 2)
         c2, s2 = np.cos(q2), np.sin(q2)
-        M = np.array([[I1 + I2 + m1 * a1**2 + m2 * (l1**2 + a2**2 + 2 * l1 * a2 * c2), I2 + m2 * (a2**2 + l1 * a2 * c2)],
-                      [I2 + m2 * (a2**2 + l1 * a2 * c2), I2 + m2 * a2**2]])
+        coupling = I2 + m2 * (a2**2 + l1 * a2 * c2)
+        M = np.array([[I1 + I2 + m1 * a1**2 + m2 * (l1**2 + a2**2 + 2 * l1 * a2 * c2), coupling],
+                      [coupling, I2 + m2 * a2**2]])
         Cqd = np.array([-m2 * l1 * a2 * s2 * (2 * u1 * u2 + u2**2), m2 * l1 * a2 * s2 * u1**2])
-        G = np.array([(m1 * a1 + m2 * l1) * g * np.cos(q1) + m2 * a2 * g * np.cos(q1 + q2), m2 * a2 * g * np.cos(q1 + q2)])
+        outer = m2 * a2 * g * np.cos(q1 + q2)
+        G = np.array([(m1 * a1 + m2 * l1) * g * np.cos(q1) + outer, outer])
         terms = model.dynamics_terms([q1, q2], [u1, u2])
         assert np.allclose(terms["M"], M, rtol=1e-13, atol=1e-13)
         assert np.allclose(terms["h"], -(Cqd + G), rtol=1e-13, atol=1e-13)

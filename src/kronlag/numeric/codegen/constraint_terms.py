@@ -17,6 +17,7 @@ kernel.  Here
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -31,8 +32,19 @@ __all__ = ["constraint_blocks", "chained_sums"]
 CHAINED_SUM_TERMS = 3
 
 
+#: The blocks of each KernelSource, computed once (the dynamics kernel and the eager ones share them).
+_BLOCKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def constraint_blocks(source: KernelSource) -> dict[str, list[list[se.Basic]]]:
     """``Phi_q`` and ``gamma`` of ``source`` differentiated from its ``Phi`` (see the module docstring)."""
+    blocks = _BLOCKS.get(source)
+    if blocks is None:
+        blocks = _BLOCKS[source] = _differentiated(source)
+    return blocks
+
+
+def _differentiated(source: KernelSource) -> dict[str, list[list[se.Basic]]]:
     phi = [row[0] for row in source.matrix("Phi")]
     time = se.Symbol("t")
     step = se.Symbol("kronlag_step")

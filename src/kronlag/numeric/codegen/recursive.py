@@ -457,6 +457,7 @@ def recursive_kernel(source: KernelSource, name: str, blocks: Sequence[Block]) -
     potential = sp.Add(*(load.potential() for load in system.loads))
     loads = source.convert(potential) if potential != 0 else zero
     load_gradient = [se.diff(loads, q) if loads != zero else zero for q in source.q]
+    sums: list[tuple[se.Symbol, se.Basic]] = []
     if name == "g":
         entries = [value + slope for value, slope in zip(bias, load_gradient)]
     else:
@@ -471,7 +472,7 @@ def recursive_kernel(source: KernelSource, name: str, blocks: Sequence[Block]) -
         others = [constraints.get(block.name) or source.matrix(block.name) for block in blocks[2:]]
         sums, constraint_entries = chained_sums([entry for rows in others for row in rows for entry in row])
         entries = [entry for rows in (mass, h) for row in rows for entry in row] + constraint_entries
-    definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs] + (sums if name == "dynamics" else [])
+    definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs] + sums
     temporaries, outputs = _eliminated(definitions, entries)
     return Kernel(name, tuple(blocks), temporaries, outputs, dict(source.convert.constants))
 
