@@ -236,3 +236,23 @@ def test_structure_keeping_kernels_compiled_with_the_model(system):
             p = rng.uniform(0.5, 1.5, len(equations.parameters)).tolist()
             mine, theirs = (np.array(function(0.0, q, qd, p)) for function in functions)
             assert np.abs(mine - theirs).max(initial=0) <= 1e-12 * max(1.0, np.abs(theirs).max(initial=0))
+
+
+@pytest.mark.parametrize("builder", [lambda: models.closed_chain(5, "relative"), cart_pole, spatial_arm],
+                         ids=["chain", "cart_pole", "spatial_arm"])
+def test_tangent_kernel_is_the_exact_derivative(builder):
+    """K = de/dq and D = de/dqd (ALI3-P's tangent) in forward mode through the recursion equal the
+    derivatives of the derivation's flat residual, at random states, accelerations and multipliers."""
+    equations = kronlag.derive(builder())
+    source = KernelSource(equations)
+    ours = source.kernel("tangent")
+    flat = cse_kernel("tangent", ours.blocks, [source.matrix("K"), source.matrix("D")], source.convert.constants)
+    functions = [python_functions(python_source(kernel), ["tangent"], SCALAR_NAMESPACE)["tangent"]
+                 for kernel in (ours, flat)]
+    m, r, s = equations.shape
+    rng = np.random.default_rng(11)
+    for _ in range(3):
+        q, qd = rng.uniform(-2, 2, m).tolist(), rng.uniform(-2, 2, m).tolist()
+        p = rng.uniform(0.5, 1.5, len(equations.parameters) + m + r + s).tolist()
+        mine, theirs = (np.array(function(0.3, q, qd, p)) for function in functions)
+        assert np.abs(mine - theirs).max() <= 1e-12 * max(1.0, np.abs(theirs).max())

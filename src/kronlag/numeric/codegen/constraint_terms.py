@@ -54,9 +54,11 @@ def _differentiated(source: KernelSource) -> dict[str, list[list[se.Basic]]]:
     return {"Phi_q": jacobian, "gamma": gamma}
 
 
-def chained_sums(entries: Sequence[se.Basic]) -> tuple[list[tuple[se.Symbol, se.Basic]], list[se.Basic]]:
-    """``entries`` with every sum of :data:`CHAINED_SUM_TERMS` or more terms replaced by a symbol, and
-    the symbols' definitions (each a sum named before plus one term where one is one term short)."""
+def chained_sums(entries: Sequence[se.Basic], *, prefix: str = "sum"
+                 ) -> tuple[list[tuple[se.Symbol, se.Basic]], list[se.Basic]]:
+    """``entries`` with every sum of :data:`CHAINED_SUM_TERMS` or more terms replaced by a symbol
+    (``<prefix>0``, ``<prefix>1``, ...), and the symbols' definitions (each a sum named before plus
+    one term where one is one term short)."""
     names: dict[frozenset, se.Symbol] = {}
     memo: dict[se.Basic, se.Basic] = {}
 
@@ -70,7 +72,7 @@ def chained_sums(entries: Sequence[se.Basic]) -> tuple[list[tuple[se.Symbol, se.
                 key = frozenset(args)
                 result = names.get(key)
                 if result is None:
-                    result = names[key] = se.Symbol(f"sum{len(names)}")
+                    result = names[key] = se.Symbol(f"{prefix}{len(names)}")
             elif isinstance(expr, se.Add):
                 result = se.Add(*args)
             elif isinstance(expr, se.Mul):

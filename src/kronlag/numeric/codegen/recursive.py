@@ -224,9 +224,11 @@ def _frames(recursion: Recursion, convert: Callable[[sp.Expr], se.Basic], qd: Se
 
 
 def bias_forces(recursion: Recursion, frames: list[_Frame], gravity: Vector, define: _Definitions,
-                convert: Callable[[sp.Expr], se.Basic]) -> list[se.Basic]:
+                convert: Callable[[sp.Expr], se.Basic], accelerations: Sequence[se.Basic] | None = None
+                ) -> list[se.Basic]:
     """``C qd + g`` by the recursive Newton-Euler algorithm (``qdd = 0``, base acceleration ``-gravity``),
-    one entry per link (its coordinate's)."""
+    one entry per link (its coordinate's); with the joints' ``accelerations`` (one per link, in the
+    links' order) ``M qdd + C qd + g``, the inverse dynamics."""
     zero = se.Integer(0)
     n = len(frames)
     omega: list[Vector] = [[]] * n
@@ -245,13 +247,14 @@ def bias_forces(recursion: Recursion, frames: list[_Frame], gravity: Vector, def
         origin_acceleration = _add(a_p, _cross(dw_p, r), _cross(w_p, define.vector(_cross(w_p, r))))
         accel_k = _apply(back, origin_acceleration)
         joint_rate = _scaled(frame.speed, frame.axis)
+        joint_acceleration = _scaled(accelerations[k], frame.axis) if accelerations is not None else [zero] * 3
         if frame.revolute:
             omega[k] = define.vector(_add(carried, joint_rate))
-            alpha[k] = define.vector(_add(_apply(back, dw_p), _cross(carried, joint_rate)))
+            alpha[k] = define.vector(_add(_apply(back, dw_p), _cross(carried, joint_rate), joint_acceleration))
         else:
             omega[k] = carried
             alpha[k] = define.vector(_apply(back, dw_p))
-            accel_k = _add(accel_k, _scaled(se.Integer(2), _cross(omega[k], joint_rate)))
+            accel_k = _add(accel_k, _scaled(se.Integer(2), _cross(omega[k], joint_rate)), joint_acceleration)
         accel[k] = define.vector(accel_k)
         if link.inertial is None:
             continue
@@ -448,15 +451,11 @@ def recursive_kernel(source: KernelSource, name: str, blocks: Sequence[Block]) -
     convert = _InputConverter(source)
     define = _Definitions()
     frames = _frames(recursion, convert, source.qd if name == "dynamics" else [zero] * m, define)
-    gravity = [convert(x) for x in system.gravity] if system.gravity is not None else [zero] * 3
-    gravity += [zero] * (3 - len(gravity))  # a planar tree's gravity in its plane
     order = [link.index for link in recursion.links]
     bias = [zero] * m  # C qd + g, or g alone at qd = 0
-    for a, entry in zip(order, bias_forces(recursion, frames, gravity, define, convert)):
+    for a, entry in zip(order, bias_forces(recursion, frames, gravity_vector(system, convert), define, convert)):
         bias[a] = convert.exact(entry)
-    potential = sp.Add(*(load.potential() for load in system.loads))
-    loads = source.convert(potential) if potential != 0 else zero
-    load_gradient = [se.diff(loads, q) if loads != zero else zero for q in source.q]
+    load_gradient = load_potential_gradient(source)
     sums: list[tuple[se.Symbol, se.Basic]] = []
     if name == "g":
         entries = [value + slope for value, slope in zip(bias, load_gradient)]
@@ -475,6 +474,21 @@ def recursive_kernel(source: KernelSource, name: str, blocks: Sequence[Block]) -
     definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs] + sums
     temporaries, outputs = _eliminated(definitions, entries)
     return Kernel(name, tuple(blocks), temporaries, outputs, dict(source.convert.constants))
+
+
+def gravity_vector(system: System, convert: Callable[[sp.Expr], se.Basic]) -> Vector:
+    """The System's gravity as a 3-vector of the kernel (a planar tree's in its plane)."""
+    zero = se.Integer(0)
+    gravity = [convert(x) for x in system.gravity] if system.gravity is not None else []
+    return gravity + [zero] * (3 - len(gravity))
+
+
+def load_potential_gradient(source: KernelSource) -> list[se.Basic]:
+    """``d(V_loads)/dq``: the gradient of the loads' potentials (springs, potentials), which the
+    recursion leaves out."""
+    potential = sp.Add(*(load.potential() for load in source.equations.system.loads))
+    loads = source.convert(potential) if potential != 0 else se.Integer(0)
+    return [se.diff(loads, q) for q in source.q]
 
 
 def _eliminated(definitions: list[tuple[se.Symbol, se.Basic]], outputs: list[se.Basic]

@@ -14,6 +14,7 @@ from ...core.kernels import Block, ExpressionConverter, Kernel, cse_kernel, expr
 from ...symbolic import matrices
 from .layouts import LAYOUTS
 from .recursive import RECURSIVE_KERNELS, recursive_kernel
+from .recursive_tangent import recursive_tangent_kernel
 
 if TYPE_CHECKING:
     from ...symbolic.equations import Equations
@@ -99,8 +100,9 @@ class KernelSource:
             return self.expression_kernel(name, friction_kernel_matrices(self.equations.system))
         names = LAYOUTS.get(name, (name,))
         blocks = tuple(Block(block, _rows_and_columns(block, self.equations.shape)) for block in names)
-        if name in RECURSIVE_KERNELS:  # a tree's M, h, g by recursive algorithms (None: not a qualifying tree)
-            recursive = recursive_kernel(self, name, blocks)
+        if name in RECURSIVE_KERNELS or name == "tangent":  # a tree's by recursive algorithms (None: not a tree)
+            recursive = recursive_kernel(self, name, blocks) if name != "tangent" else recursive_tangent_kernel(
+                self, blocks)
             if recursive is not None:
                 return recursive
         return cse_kernel(name, blocks, [self.matrix(block) for block in names], self.convert.constants)
