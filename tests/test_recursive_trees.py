@@ -15,7 +15,12 @@ from test_recursive_kernels import assert_same_dynamics, operations
 import kronlag
 from kronlag import models
 from kronlag.core.errors import ModelError
-from kronlag.core.kernels import SCALAR_NAMESPACE, cse_kernel, python_functions, python_source
+from kronlag.core.kernels import (
+    SCALAR_NAMESPACE,
+    cse_kernel,
+    python_functions,
+    python_source,
+)
 from kronlag.model.bodies import PlanarBody
 from kronlag.model.trees import TreeDeclarationWarning
 from kronlag.numeric.codegen import KernelSource

@@ -43,8 +43,8 @@ from .loads import (
     Spring,
 )
 from .structure import describe
-from .trees import TreeLink, make_tree_link
 from .symbols import MULTIPLIER_NAME, acceleration_symbol, check_name, free_symbols, speed_symbol, t
+from .trees import TreeLink, make_tree_link
 
 if TYPE_CHECKING:
     from .robot_formats.description import RobotDescription
