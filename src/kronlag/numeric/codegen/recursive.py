@@ -67,7 +67,7 @@ def recursion_of(system: System) -> tuple[Recursion | None, str]:
     kernel (the second item: ``"recursive"`` or the reason in words): the declared tree
     (:meth:`~kronlag.System.add_tree_link`, checked against the bodies:
     :func:`~kronlag.numeric.codegen.tree_links.declared_recursion`) or the robot reader's."""
-    if system.tree:
+    if getattr(system, "tree", None):  # a System pickled before declared trees has none
         return declared_recursion(system)
     robot = getattr(system, "robot", None)
     if robot is None:
@@ -438,7 +438,7 @@ def recursive_kernel(source: KernelSource, name: str, blocks: Sequence[Block]) -
     system = source.equations.system
     recursion, reason = _recursion(source)
     if recursion is None:
-        if system.tree and name == "dynamics":
+        if getattr(system, "tree", None) and name == "dynamics":
             warnings.warn(f"system {system.name!r}: the declared kinematic tree is not used ({reason}); "
                           "M and h come from the flat derivation", TreeDeclarationWarning, stacklevel=3)
         return None
