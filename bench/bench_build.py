@@ -182,7 +182,7 @@ def main() -> None:
         r = json.loads(output.strip().splitlines()[-1])
         target = TARGETS_S.get((n, angles))
         verdict = "" if target is None else f"  (target {target:.0f} s: {'ok' if r['total'] <= target else 'OVER'})"
-        print(f"\nclosed_chain({n}, {angles!r}): {r['algorithm']} M and h, {r['cse_method']}, "
+        print(f"\nclosed_chain({n}, {angles!r}): M and h {r['algorithm']}, {r['cse_method']}, "
               f"{r['temporaries']} temporaries, {r['kernel_kb']:.0f} KiB of kernel C "
               f"({r['source_kb']:.0f} KiB with the solver), compiled in {r['parts']} parallel parts")
         print(f"  derive + eom.numeric(backend='c')  {r['total']:7.2f} s{verdict}  (load {os.getloadavg()[0]:.1f})")
