@@ -22,9 +22,13 @@ directory):
   it compiles on top (target 1 s);
 * the same work again, split into its phases: *derivation*, *conversion*
   (SymPy -> SymEngine of M, h = f_Q - C qd - g, Phi, Phi_q, the time derivatives
-  gamma, ...), *CSE* of the forward-dynamics kernel (``symengine.cse``, or ``linear_cse``
-  above ``LINEAR_CSE_OUTPUTS`` outputs: the method is printed), *C text* (printing the source)
+  gamma, ...; with recursive kernels only the blocks read off the derivation), *CSE* of the
+  forward-dynamics kernel (``symengine.cse``, or ``linear_cse`` above ``LINEAR_CSE_OUTPUTS``
+  outputs: the method is printed; with recursive kernels the tree's check and the recursion
+  too), *C text* (printing the source)
   and *compilation* (the C compiler on the parts of the source in parallel, a cache emptied again);
+* each kernel compiled with the model (``"dynamics"`` and the small ones its library holds; with
+  ``--tangent`` also ALI3-P's ``"tangent"``): its construction time and the size of its C text;
 * ``eom.numeric(parameters, backend="python")`` for comparison (up to n = 20);
 * with ``--compare-cse``: ``sympy.cse`` against ``symengine.cse`` on the mass
   matrix alone (``sympy.cse`` of the whole kernel takes minutes).
@@ -53,12 +57,13 @@ FIRST_SIMULATE_TARGET_S = 1.0
 PYTHON_BACKEND_MAX_N = 20
 
 
-def measure(n: int, angles: str, compare_cse: bool) -> dict:
+def measure(n: int, angles: str, compare_cse: bool, with_tangent: bool = False) -> dict:
     """One case, in this process (called in a fresh subprocess with an empty cache)."""
     import symengine as se
     import sympy as sp
 
     from kronlag import codegen, derive, models
+    from kronlag.numeric.codegen.recursive import dynamics_algorithm
 
     import resource
 
@@ -92,7 +97,10 @@ def measure(n: int, angles: str, compare_cse: bool) -> dict:
     phases["derivation"] = time.perf_counter() - start
     start = time.perf_counter()
     source = codegen.KernelSource(eom)
-    for block in codegen.LAYOUTS["dynamics"]:
+    algorithm = dynamics_algorithm(eom.system)
+    # the blocks the dynamics kernel reads off the derivation (a recursive kernel computes M, h, Phi_q, gamma)
+    read = codegen.LAYOUTS["dynamics"] if algorithm != "recursive" else ("f_Q", "Phi", "Phi_t", "A", "b", "gamma_nh")
+    for block in read:
         source.matrix(block)
     phases["conversion"] = time.perf_counter() - start
     start = time.perf_counter()
@@ -109,9 +117,22 @@ def measure(n: int, angles: str, compare_cse: bool) -> dict:
     from kronlag.core.kernels import LINEAR_CSE_OUTPUTS
 
     outputs = sum(block.size for block in kernel.blocks)
+    result["algorithm"] = algorithm
     result["cse_method"] = "linear_cse" if outputs > LINEAR_CSE_OUTPUTS else "symengine.cse"
     result.update(phases=phases, temporaries=len(kernel.temporaries), source_kb=len(library.source) / 1024,
                   kernel_kb=len(text) / 1024, parts=codegen.library_parts(library.source))
+    # what the model's library is made of: each kernel compiled with it, its construction time
+    # (conversion + CSE, the recursion's check once) and its C text
+    from kronlag.numeric.numeric_model import _LIBRARY_GROUPS
+
+    fresh_source = codegen.KernelSource(eom)
+    kernels = {}
+    for name in _LIBRARY_GROUPS["dynamics"] + (("tangent",) if with_tangent else ()):
+        start = time.perf_counter()
+        built = fresh_source.kernel(name)
+        made = time.perf_counter() - start
+        kernels[name] = (made, len(codegen.c_kernel(built, 0)[0]) / 1024)
+    result["kernels"] = kernels
     if n <= PYTHON_BACKEND_MAX_N:
         start = time.perf_counter()
         eom.numeric(values, backend="python")
@@ -133,13 +154,15 @@ def main() -> None:
     parser.add_argument("--n", type=int, nargs="+", help="numbers of links (both conventions each); "
                         "default: the target cases")
     parser.add_argument("--compare-cse", action="store_true", help="also time sympy.cse on M")
+    parser.add_argument("--tangent", action="store_true",
+                        help="also build the tangent kernel (ALI3-P's, compiled when a run needs it)")
     parser.add_argument("--case", nargs=2, help=argparse.SUPPRESS)
     parser.add_argument("--quick", action="store_true", help="smoke test: n = 8, both conventions")
     add_arguments(parser)
     arguments = parser.parse_args()
     if arguments.case:
         n, angles = int(arguments.case[0]), arguments.case[1]
-        print(json.dumps(measure(n, angles, arguments.compare_cse)))
+        print(json.dumps(measure(n, angles, arguments.compare_cse, arguments.tangent)))
         return
     record = Record("bench_build", arguments)
     sizes = [8] if arguments.quick and not arguments.n else arguments.n
@@ -152,12 +175,15 @@ def main() -> None:
             command = [sys.executable, SCRIPT, "--case", str(n), angles]
             if arguments.compare_cse:
                 command.append("--compare-cse")
+            if arguments.tangent:
+                command.append("--tangent")
             output = subprocess.run(command, capture_output=True, text=True, check=True,
                                     env={**os.environ, "KRONLAG_CACHE": cache}).stdout
         r = json.loads(output.strip().splitlines()[-1])
         target = TARGETS_S.get((n, angles))
         verdict = "" if target is None else f"  (target {target:.0f} s: {'ok' if r['total'] <= target else 'OVER'})"
-        print(f"\nclosed_chain({n}, {angles!r}): {r['cse_method']}, {r['temporaries']} temporaries, {r['kernel_kb']:.0f} KiB of kernel C "
+        print(f"\nclosed_chain({n}, {angles!r}): M and h {r['algorithm']}, {r['cse_method']}, "
+              f"{r['temporaries']} temporaries, {r['kernel_kb']:.0f} KiB of kernel C "
               f"({r['source_kb']:.0f} KiB with the solver), compiled in {r['parts']} parallel parts")
         print(f"  derive + eom.numeric(backend='c')  {r['total']:7.2f} s{verdict}  (load {os.getloadavg()[0]:.1f})")
         print(f"  CPU: Python {r['python_cpu']:.2f} s, compilers {r['compiler_cpu']:.2f} s (at least "
@@ -169,6 +195,9 @@ def main() -> None:
               f"{'ok' if r['first_simulate'] <= FIRST_SIMULATE_TARGET_S else 'OVER'})")
         for phase, seconds in r["phases"].items():
             print(f"    {phase:30s} {seconds:7.2f} s")
+        print("  the model's kernels: construction (conversion, CSE) and C text")
+        for name, (seconds, kib) in r["kernels"].items():
+            print(f"    {name:30s} {seconds:7.2f} s {kib:8.0f} KiB")
         if "numeric_python" in r:
             print(f"  eom.numeric(backend='python')     {r['numeric_python']:7.2f} s  (after derive)")
         if arguments.compare_cse:

@@ -52,6 +52,7 @@ import numpy as np
 
 import kronlag
 from kronlag import models
+from kronlag.numeric.codegen.recursive import dynamics_algorithm
 
 from common import Record, add_arguments
 
@@ -190,7 +191,8 @@ def bench(n: int, angles: str) -> dict[str, float]:
     ratio, ours, peer = interleaved_ratio(lambda: c_model.forward_dynamics(q, qd), lambda: forward(q_rel, qd_rel),
                                           number=5000)
     times["interleaved ratio"] = ratio
-    print(f"\nclosed_chain({n}, {angles!r}): m = {n}, r = 2; pinocchio {pin.__version__}")
+    print(f"\nclosed_chain({n}, {angles!r}): m = {n}, r = 2; pinocchio {pin.__version__}; "
+          f"M and h: {dynamics_algorithm(eom.system)}")
     print(f"  check: |qdd_kronlag - ddq_pinocchio| / |qdd| = {qdd_difference:.1e}, "
           f"constraint forces {force_difference:.1e}, Python vs C {numpy_difference:.1e}")
     reference = times["pinocchio constraintDynamics"]

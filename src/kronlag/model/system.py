@@ -44,6 +44,7 @@ from .loads import (
 )
 from .structure import describe
 from .symbols import MULTIPLIER_NAME, acceleration_symbol, check_name, free_symbols, speed_symbol, t
+from .trees import TreeLink, make_tree_link
 
 if TYPE_CHECKING:
     from .robot_formats.description import RobotDescription
@@ -108,6 +109,7 @@ class System:
         self.drives: list[str] = []  # names of the constraints added by add_drive
         self.limits: list[Limit] = []
         self.robot: RobotDescription | None = None  # set by the robot file readers (kronlag.model.robot_formats)
+        self.tree: list[TreeLink] = []  # a declared kinematic tree (add_tree_link), parents first
         if gravity is not None:
             vector = as_vector(gravity, "gravity", (2, 3))
             self._check_symbols(vector, "gravity", allow_q=False)
@@ -231,6 +233,63 @@ class System:
             if body.name == name:
                 return body
         raise ModelError(f"no body named {name!r}; bodies are {[b.name for b in self.bodies]}")
+
+    def add_tree_link(self, body: str, coordinate: sp.Symbol, *, parent: str = "ground",
+                      joint: str = "revolute", origin=None, angle=0, rotation=None, axis=None,
+                      centre=None) -> TreeLink:
+        """Declare that ``body`` hangs from ``parent`` by a one-coordinate joint (a declared tree,
+        :mod:`kronlag.model.trees`), so that ``M`` and ``C qd + g`` may be computed recursively.
+
+        The declaration does not change the equations (the bodies' own expressions define them);
+        before relying on it, the C and Python kernels check that it reproduces every body's pose at
+        random states and otherwise keep the flat kernel with a ``TreeDeclarationWarning`` naming the
+        body (:func:`kronlag.numeric.codegen.recursive.dynamics_algorithm` says which is used).
+
+        Parameters
+        ----------
+        body : str
+            An added body not yet in the tree.
+        coordinate : sympy.Symbol
+            The joint's coordinate (a coordinate of the System, one link each).
+        parent : str
+            A body declared before, or ``"ground"``.
+        joint : {"revolute", "prismatic"}
+        origin : vector of 2 (planar) or 3 expressions, optional
+            The joint's place in the parent's frame (default: its origin).
+        angle : expression, optional
+            Planar: the joint frame's turn in the parent's frame at ``coordinate = 0``.
+        rotation : 3x3 matrix, optional
+            Spatial: the joint frame's axes in the parent's frame (default: the parent's).
+        axis : vector of 2 or 3 numbers, optional
+            The joint axis in the joint frame (planar revolute: z, not given; planar prismatic:
+            default ``(1, 0)``; spatial: required).
+        centre : vector of 2 or 3 expressions, optional
+            The body's centre of mass in the link frame (default: the joint).
+
+        Returns
+        -------
+        TreeLink
+        """
+        what = f"tree link {body!r}"
+        if self.dimension not in (2, 3):
+            raise ModelError(f"{what}: add the bodies (or gravity) first: the tree is planar or spatial")
+        self.body(body)
+        if any(link.body == body for link in self.tree):
+            raise ModelError(f"{what}: body {body!r} is already in the tree")
+        if parent != "ground" and not any(link.body == parent for link in self.tree):
+            raise ModelError(f"{what}: parent {parent!r} must be 'ground' or a body declared before it")
+        if coordinate not in self.coordinates:
+            raise ModelError(f"{what}: {coordinate!r} is not a coordinate of the system")
+        if any(link.coordinate == coordinate for link in self.tree):
+            raise ModelError(f"{what}: coordinate {coordinate} already moves another link")
+        planar = self.dimension == 2
+        link = make_tree_link(body, coordinate, parent=parent, joint=joint,
+                              origin=(0,) * self.dimension if origin is None else origin, angle=angle,
+                              rotation=rotation, axis=axis,
+                              centre=(0,) * self.dimension if centre is None else centre, planar=planar)
+        self._check_symbols(sp.Matrix([*link.origin, *link.rotation, *link.centre]), what, allow_q=False)
+        self.tree.append(link)
+        return link
 
     def add_point(self, name: str, body: str, local):
         """Name the point with body coordinates ``local`` (from the centre of mass, in the body

@@ -238,3 +238,10 @@ def c_macros(rank_rtol: float) -> str:
 #: angle, else the System keeps the flat kernel (a reader's frame that disagreed would be a defect).
 TREE_AXIS_RTOL = 1e-12
 __all__ += ["TREE_AXIS_RTOL"]
+
+#: Declared kinematic trees (:meth:`kronlag.System.add_tree_link`): composed from the root, the links
+#: must place every body's centre of mass (relative to 1 + the largest coordinate of the positions)
+#: and orientation (rotation matrix entries) as the body's own expressions do to this accuracy at
+#: random states, else the recursive kernel is not used (the flat one is, with a warning).
+TREE_POSE_RTOL = 1e-10
+__all__ += ["TREE_POSE_RTOL"]

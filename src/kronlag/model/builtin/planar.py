@@ -94,7 +94,9 @@ def closed_chain(n: int, angles: str = "absolute") -> System:
     ``I1..In``; the first is pinned at the origin, the tip of the last at the
     ground point (``xg``, ``yg``); gravity ``g`` along -y.  Coordinates
     ``q1..qn`` are the links' absolute angles (``angles="absolute"``) or the
-    joint angles relative to the previous link (``angles="relative"``).
+    joint angles relative to the previous link (``angles="relative"``); a
+    relative chain declares its kinematic tree (:meth:`System.add_tree_link`),
+    so that its ``M`` and ``C qd + g`` are computed recursively.
     """
     if not isinstance(n, int) or n < 2:
         raise ModelError(f"closed_chain needs an integer n >= 2 links, got {n!r}")
@@ -113,6 +115,9 @@ def closed_chain(n: int, angles: str = "absolute") -> System:
     for i in range(n):
         angle = q[i] if angles == "absolute" else angle + q[i]
         system.add_body(_bar(f"link {i + 1}", masses[i], inertias[i], joint, lengths[i], angle))
+        if angles == "relative":  # a serial chain in joint angles: M and C qd + g may be recursive
+            system.add_tree_link(f"link {i + 1}", q[i], parent="ground" if i == 0 else f"link {i}",
+                                 origin=(0, 0) if i == 0 else (lengths[i - 1], 0), centre=(lengths[i] / 2, 0))
         joint = (joint[0] + lengths[i] * cos(angle), joint[1] + lengths[i] * sin(angle))
         joints.append(joint)
     system.add_constraint(joint[0] - xg, name="tip x")

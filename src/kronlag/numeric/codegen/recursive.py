@@ -1,11 +1,12 @@
-"""Recursive, structure-keeping ``M`` and ``h`` of the ``"dynamics"`` kernel for robot trees.
+"""Recursive, structure-keeping ``M`` and ``h`` of the ``"dynamics"`` kernel for kinematic trees.
 
 The derivation (:mod:`kronlag.symbolic.derivation`) writes every body's pose as a flat expression of
 all the coordinates above it, so the kernel cannot reuse a parent's rotation, velocity or
-acceleration the way a recursive algorithm does.  For a System read from a robot file in joint
-coordinates (:func:`recursion_of` says which qualify) this module writes the two blocks the way
-Pinocchio computes them, in each body's own frame, every intermediate quantity a fresh symbol
-defined once (a temporary of the kernel), so that nothing is expanded across the tree:
+acceleration the way a recursive algorithm does.  For a System that is a tree in joint coordinates
+(:func:`recursion_of` says which qualify: read from a robot file, or with a declared tree,
+:meth:`kronlag.System.add_tree_link`) this module writes the two blocks the way Pinocchio computes
+them, in each body's own frame, every intermediate quantity a fresh symbol defined once (a
+temporary of the kernel), so that nothing is expanded across the tree:
 
 * ``C qd + g`` by the recursive Newton-Euler algorithm with ``qdd = 0`` and the base accelerating
   at ``-gravity`` (Luh, Walker and Paul 1980): angular velocities and accelerations and the
@@ -16,18 +17,24 @@ defined once (a temporary of the kernel), so that nothing is expanded across the
   joint carried inward to every joint above it.
 
 ``h = f_Q - (C qd + g) - d(V_loads)/dq`` with the generalized forces ``f_Q`` and the potentials of
-the loads read from the derivation.  The other blocks of the kernel (``Phi``, ``Phi_q``, ``gamma``,
-...) are the derivation's; one ``symengine.cse`` runs over the definitions and all the blocks.
+the loads read from the derivation.  ``Phi_q`` and ``gamma`` are differentiated from ``Phi``
+without expanding it (:mod:`~kronlag.numeric.codegen.constraint_terms`); the other blocks (``Phi``,
+``A``, ...) are the derivation's; one ``symengine.cse`` runs over the definitions and all the
+blocks.  The kernels ``g``, ``Phi_q`` and ``gamma`` compiled with the model are written the same way
+(:data:`RECURSIVE_KERNELS`).
 
-A System qualifies when it is exactly what the reader made (:attr:`RobotDescription.tree_bodies`,
+A robot System qualifies when it is exactly what the reader made (:attr:`RobotDescription.tree_bodies`,
 the System's bodies those very objects), in joint coordinates, with a fixed base and revolute,
-continuous or prismatic joints only; any other System (floating, ball, planar or universal joints,
-absolute coordinates, a body added or replaced, hand-built Systems) keeps the flat kernel:
-:func:`recursion_of` returns the reason, and :func:`dynamics_algorithm` names the choice.
+continuous or prismatic joints only; a System with a declared tree when the declaration passes
+:func:`~kronlag.numeric.codegen.tree_links.declared_recursion` (every body in it, placed as its own
+expressions say).  Any other System keeps the flat kernel: :func:`recursion_of` returns the reason,
+and :func:`dynamics_algorithm` names the choice.
 """
 
 from __future__ import annotations
 
+import warnings
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -40,45 +47,28 @@ from ...core.kernels import Block, Kernel
 from ...model.frames import GROUND
 from ...model.symbols import free_symbols
 from ...model.system import System
+from ...model.trees import TreeDeclarationWarning
 from ..tolerances import TREE_AXIS_RTOL
+from .constraint_terms import chained_sums, constraint_blocks
+from .tree_links import Recursion, RecursionLink, declared_recursion
 
 if TYPE_CHECKING:
     from .source import KernelSource
 
-__all__ = ["TreeLink", "Recursion", "recursion_of", "dynamics_algorithm", "bias_forces", "mass_matrix",
-           "recursive_dynamics_kernel"]
+__all__ = ["RecursionLink", "Recursion", "recursion_of", "dynamics_algorithm", "bias_forces", "mass_matrix",
+           "recursive_kernel", "RECURSIVE_KERNELS"]
 
 #: The joints the recursion moves along (one coordinate each); the readers merge fixed joints.
 RECURSIVE_JOINTS = ("revolute", "continuous", "prismatic")
 
 
-@dataclass(frozen=True)
-class TreeLink:
-    """A moving body of the tree: its name, joint kind, parent body (``"ground"``: the fixed root), its
-    frame in the parent body's frame (SymPy: ``origin``, ``rotation``, expressions of its coordinate),
-    the joint axis in its own frame, its coordinate's index and its inertial (mass, centre of mass in
-    its frame, central inertia tensor; ``None``: massless)."""
-
-    name: str
-    kind: str
-    parent: str
-    origin: sp.Matrix
-    rotation: sp.Matrix
-    axis: tuple[float, float, float]
-    index: int
-    inertial: tuple[sp.Expr, tuple[float, float, float], sp.Matrix] | None
-
-
-@dataclass(frozen=True)
-class Recursion:
-    """The tree of a qualifying System, parents before children (the reader's depth-first order)."""
-
-    links: tuple[TreeLink, ...]
-
-
 def recursion_of(system: System) -> tuple[Recursion | None, str]:
     """The tree the recursive kernels run on, or ``None`` with the reason the System keeps the flat
-    kernel (the second item: ``"recursive"`` or the reason in words)."""
+    kernel (the second item: ``"recursive"`` or the reason in words): the declared tree
+    (:meth:`~kronlag.System.add_tree_link`, checked against the bodies:
+    :func:`~kronlag.numeric.codegen.tree_links.declared_recursion`) or the robot reader's."""
+    if getattr(system, "tree", None):  # a System pickled before declared trees has none
+        return declared_recursion(system)
     robot = getattr(system, "robot", None)
     if robot is None:
         return None, "not read from a robot file"
@@ -106,7 +96,7 @@ def recursion_of(system: System) -> tuple[Recursion | None, str]:
         step = robot.local_frames[joint.child][1]
         tree_body = robot.tree_bodies.get(joint.child)
         inertial = None if tree_body is None else (tree_body.body.mass, tree_body.centre, tree_body.body.inertia)
-        link = TreeLink(joint.child, joint.kind, parent, origin + rotation * sp.Matrix(step.origin),
+        link = RecursionLink(joint.child, joint.kind, parent, origin + rotation * sp.Matrix(step.origin),
                         rotation * sp.Matrix(step.rotation), joint.axis, index[joint.coordinate], inertial)
         if not _moves_as_joint(link, system.coordinates[link.index]):
             return None, f"the frame of link {link.name!r} does not move as its {joint.kind} joint {joint.name!r}"
@@ -124,7 +114,7 @@ def _in_body_frame(robot, link: str, body: str) -> tuple[sp.Matrix, sp.Matrix]:
     return origin, rotation
 
 
-def _moves_as_joint(link: TreeLink, coordinate: sp.Symbol, angle: float = 0.7) -> bool:
+def _moves_as_joint(link: RecursionLink, coordinate: sp.Symbol, angle: float = 0.7) -> bool:
     """Whether the link's frame turns about its unit axis (revolute) or slides along it (prismatic) as
     its coordinate goes from 0 to ``angle``: what the recursion assumes of every joint."""
     variable = se.Symbol(coordinate.name)
@@ -234,9 +224,11 @@ def _frames(recursion: Recursion, convert: Callable[[sp.Expr], se.Basic], qd: Se
 
 
 def bias_forces(recursion: Recursion, frames: list[_Frame], gravity: Vector, define: _Definitions,
-                convert: Callable[[sp.Expr], se.Basic]) -> list[se.Basic]:
+                convert: Callable[[sp.Expr], se.Basic], accelerations: Sequence[se.Basic] | None = None
+                ) -> list[se.Basic]:
     """``C qd + g`` by the recursive Newton-Euler algorithm (``qdd = 0``, base acceleration ``-gravity``),
-    one entry per link (its coordinate's)."""
+    one entry per link (its coordinate's); with the joints' ``accelerations`` (one per link, in the
+    links' order) ``M qdd + C qd + g``, the inverse dynamics."""
     zero = se.Integer(0)
     n = len(frames)
     omega: list[Vector] = [[]] * n
@@ -255,19 +247,20 @@ def bias_forces(recursion: Recursion, frames: list[_Frame], gravity: Vector, def
         origin_acceleration = _add(a_p, _cross(dw_p, r), _cross(w_p, define.vector(_cross(w_p, r))))
         accel_k = _apply(back, origin_acceleration)
         joint_rate = _scaled(frame.speed, frame.axis)
+        joint_acceleration = _scaled(accelerations[k], frame.axis) if accelerations is not None else [zero] * 3
         if frame.revolute:
             omega[k] = define.vector(_add(carried, joint_rate))
-            alpha[k] = define.vector(_add(_apply(back, dw_p), _cross(carried, joint_rate)))
+            alpha[k] = define.vector(_add(_apply(back, dw_p), _cross(carried, joint_rate), joint_acceleration))
         else:
             omega[k] = carried
             alpha[k] = define.vector(_apply(back, dw_p))
-            accel_k = _add(accel_k, _scaled(se.Integer(2), _cross(omega[k], joint_rate)))
+            accel_k = _add(accel_k, _scaled(se.Integer(2), _cross(omega[k], joint_rate)), joint_acceleration)
         accel[k] = define.vector(accel_k)
         if link.inertial is None:
             continue
         mass, centre, inertia = link.inertial
         m = convert(mass)
-        c = [_number(x) for x in centre]
+        c = [_entry(x, convert) for x in centre]
         tensor = [[convert(inertia[i, j]) for j in range(3)] for i in range(3)]
         w, dw = omega[k], alpha[k]
         centre_acceleration = _add(accel[k], _cross(dw, c), _cross(w, define.vector(_cross(w, c))))
@@ -301,7 +294,7 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
             continue
         m_sym, centre, inertia = link.inertial
         m = convert(m_sym)
-        c = [_number(x) for x in centre]
+        c = [_entry(x, convert) for x in centre]
         mass[k], first[k] = m, _scaled(m, c)
         squared = _dot(c, c)
         about_origin[k] = [[convert(inertia[i, j]) + m * ((squared if i == j else zero) - c[i] * c[j])
@@ -331,24 +324,38 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
                     - r[i] * moved[j] - moved[i] * r[j]
                 about_origin[p][i][j] = about_origin[p][i][j] + rotated + shift
                 about_origin[p][j][i] = about_origin[p][i][j]
+    # each link's frame in the world (rotation, origin), its joint axis s and the axis' moment o x s there
+    world: list[tuple[list[list[se.Basic]], Vector, Vector, Vector]] = []
+    for frame in frames:
+        if frame.parent is None:
+            rotation, origin = frame.rotation, frame.origin
+        else:
+            parent_rotation, parent_origin = world[frame.parent][:2]
+            rotation = [[define(se.Add(*(parent_rotation[i][a] * frame.rotation[a][j] for a in range(3))))
+                         for j in range(3)] for i in range(3)]
+            origin = define.vector(_add(parent_origin, _apply(parent_rotation, frame.origin)))
+        axis = define.vector(_apply(rotation, frame.axis))
+        world.append((rotation, origin, axis, define.vector(_cross(origin, axis))))
+    # M[k][j] for j = k and its ancestors: the world momentum (linear L, angular A about the world origin)
+    # of a unit speed of joint k, projected on joint j's axis line: s . A + (o x s) . L, or s . L for a slide
     result = [[zero] * n for _ in range(n)]
     for k, frame in enumerate(frames):
         s = frame.axis
         if frame.revolute:  # momentum of a unit turn about the axis through the origin
-            linear = define.vector(_cross(s, first[k]))
-            angular = define.vector(_apply(about_origin[k], s))
+            linear = _cross(s, first[k])
+            angular = _apply(about_origin[k], s)
         else:  # of a unit slide along the axis
-            linear = define.vector(_scaled(mass[k], s))
-            angular = define.vector(_cross(first[k], s))
-        j = k
-        while True:
-            joint = frames[j]
-            result[k][j] = result[j][k] = define(_dot(joint.axis, angular if joint.revolute else linear))
-            if joint.parent is None:
-                break
-            linear_up = define.vector(_apply(joint.rotation, linear))
-            angular = define.vector(_add(_apply(joint.rotation, angular), _cross(joint.origin, linear_up)))
-            linear, j = linear_up, joint.parent
+            linear = _scaled(mass[k], s)
+            angular = _cross(first[k], s)
+        rotation, origin = world[k][:2]
+        momentum = define.vector(_apply(rotation, define.vector(linear)))
+        moment = define.vector(_add(_apply(rotation, define.vector(angular)), _cross(origin, momentum)))
+        j: int | None = k
+        while j is not None:
+            _, _, axis, axis_moment = world[j]
+            value = _dot(axis, moment) + _dot(axis_moment, momentum) if frames[j].revolute else _dot(axis, momentum)
+            result[k][j] = result[j][k] = define(value)
+            j = frames[j].parent
     return result
 
 
@@ -393,6 +400,11 @@ class _InputConverter:
         return result
 
 
+def _entry(value, convert: Callable[[sp.Expr], se.Basic]) -> se.Basic:
+    """A number of a robot file (:func:`_number`) or an expression of a declared tree."""
+    return _number(value) if isinstance(value, int | float) else convert(value)
+
+
 def _number(value: float) -> se.Basic:
     """A number of the file: an integer exactly, else a double."""
     return se.Integer(int(value)) if float(value).is_integer() else se.RealDouble(float(value))
@@ -401,40 +413,82 @@ def _number(value: float) -> se.Basic:
 # -- the kernel ------------------------------------------------------------------------------------
 
 
-def recursive_dynamics_kernel(source: KernelSource, blocks: Sequence[Block]) -> Kernel | None:
-    """The ``"dynamics"`` kernel of ``source`` (a :class:`~kronlag.numeric.codegen.KernelSource`) with
-    ``M`` and ``h`` computed recursively, or ``None`` when its System does not qualify
-    (:func:`recursion_of`).  ``blocks`` are the kernel's blocks, ``M`` and ``h`` first."""
+#: The kernels written here for a qualifying System (:func:`recursive_kernel`): the forward dynamics,
+#: and the compiled-with-the-model kernels whose flat forms grow fastest (``g``: n^2 terms in relative
+#: angles; ``Phi_q``, ``gamma``: :mod:`~kronlag.numeric.codegen.constraint_terms`).
+RECURSIVE_KERNELS = ("dynamics", "g", "Phi_q", "gamma")
+
+#: The recursion of each KernelSource's System, found once (the declared tree's check evaluates poses).
+_RECURSIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _recursion(source: KernelSource) -> tuple[Recursion | None, str]:
+    found = _RECURSIONS.get(source)
+    if found is None:
+        found = _RECURSIONS[source] = recursion_of(source.equations.system)
+    return found
+
+
+def recursive_kernel(source: KernelSource, name: str, blocks: Sequence[Block]) -> Kernel | None:
+    """Kernel ``name`` of :data:`RECURSIVE_KERNELS` of ``source`` (a
+    :class:`~kronlag.numeric.codegen.KernelSource`) written structure-keeping, or ``None`` when its
+    System does not qualify (:func:`recursion_of`; a declared tree that fails its check warns once,
+    with the ``"dynamics"`` kernel).  ``blocks`` are the kernel's blocks (``M`` and ``h`` first for
+    ``"dynamics"``)."""
     system = source.equations.system
-    recursion, _ = recursion_of(system)
+    recursion, reason = _recursion(source)
     if recursion is None:
+        if getattr(system, "tree", None) and name == "dynamics":
+            warnings.warn(f"system {system.name!r}: the declared kinematic tree is not used ({reason}); "
+                          "M and h come from the flat derivation", TreeDeclarationWarning, stacklevel=3)
         return None
-    assert [block.name for block in blocks[:2]] == ["M", "h"], "the dynamics kernel starts with M and h"
+    if name in ("Phi_q", "gamma"):
+        sums, outputs = chained_sums([entry for row in constraint_blocks(source)[name] for entry in row])
+        temporaries, outputs = _eliminated(sums, outputs)
+        return Kernel(name, tuple(blocks), temporaries, outputs, dict(source.convert.constants))
     m = source.m
+    zero = se.Integer(0)
     convert = _InputConverter(source)
     define = _Definitions()
-    frames = _frames(recursion, convert, source.qd, define)
-    zero = se.Integer(0)
-    gravity = [convert(x) for x in system.gravity] if system.gravity is not None else [zero] * 3
-    bias = bias_forces(recursion, frames, gravity, define, convert)
-    by_link = mass_matrix(recursion, frames, define, convert)
+    frames = _frames(recursion, convert, source.qd if name == "dynamics" else [zero] * m, define)
     order = [link.index for link in recursion.links]
-    mass = [[zero] * m for _ in range(m)]
-    velocity_and_gravity = [zero] * m
-    for a, row, entry in zip(order, by_link, bias):
-        velocity_and_gravity[a] = convert.exact(entry)
-        for b, value in zip(order, row):
-            mass[a][b] = convert.exact(value)
-    potential = sp.Add(*(load.potential() for load in system.loads))
-    loads = source.convert(potential) if potential != 0 else zero
-    forces = source.matrix("f_Q")
-    h = [[forces[i][0] - velocity_and_gravity[i] - (se.diff(loads, source.q[i]) if loads != zero else zero)]
-         for i in range(m)]
-    matrices = [mass, h, *(source.matrix(block.name) for block in blocks[2:])]
-    entries = [entry for rows in matrices for row in rows for entry in row]
-    definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs]
+    bias = [zero] * m  # C qd + g, or g alone at qd = 0
+    for a, entry in zip(order, bias_forces(recursion, frames, gravity_vector(system, convert), define, convert)):
+        bias[a] = convert.exact(entry)
+    load_gradient = load_potential_gradient(source)
+    sums: list[tuple[se.Symbol, se.Basic]] = []
+    if name == "g":
+        entries = [value + slope for value, slope in zip(bias, load_gradient)]
+    else:
+        assert [block.name for block in blocks[:2]] == ["M", "h"], "the dynamics kernel starts with M and h"
+        mass = [[zero] * m for _ in range(m)]
+        for a, row in zip(order, mass_matrix(recursion, frames, define, convert)):
+            for b, value in zip(order, row):
+                mass[a][b] = convert.exact(value)
+        forces = source.matrix("f_Q")
+        h = [[forces[i][0] - bias[i] - load_gradient[i]] for i in range(m)]
+        constraints = constraint_blocks(source)
+        others = [constraints.get(block.name) or source.matrix(block.name) for block in blocks[2:]]
+        sums, constraint_entries = chained_sums([entry for rows in others for row in rows for entry in row])
+        entries = [entry for rows in (mass, h) for row in rows for entry in row] + constraint_entries
+    definitions = [(symbol, convert.exact(expr)) for symbol, expr in define.pairs] + sums
     temporaries, outputs = _eliminated(definitions, entries)
-    return Kernel("dynamics", tuple(blocks), temporaries, outputs, dict(source.convert.constants))
+    return Kernel(name, tuple(blocks), temporaries, outputs, dict(source.convert.constants))
+
+
+def gravity_vector(system: System, convert: Callable[[sp.Expr], se.Basic]) -> Vector:
+    """The System's gravity as a 3-vector of the kernel (a planar tree's in its plane)."""
+    zero = se.Integer(0)
+    gravity = [convert(x) for x in system.gravity] if system.gravity is not None else []
+    return gravity + [zero] * (3 - len(gravity))
+
+
+def load_potential_gradient(source: KernelSource) -> list[se.Basic]:
+    """``d(V_loads)/dq``: the gradient of the loads' potentials (springs, potentials), which the
+    recursion leaves out."""
+    potential = sp.Add(*(load.potential() for load in source.equations.system.loads))
+    loads = source.convert(potential) if potential != 0 else se.Integer(0)
+    return [se.diff(loads, q) for q in source.q]
 
 
 def _eliminated(definitions: list[tuple[se.Symbol, se.Basic]], outputs: list[se.Basic]

@@ -13,7 +13,8 @@ import sympy as sp
 from ...core.kernels import Block, ExpressionConverter, Kernel, cse_kernel, expression_kernel, input_renames
 from ...symbolic import matrices
 from .layouts import LAYOUTS
-from .recursive import recursive_dynamics_kernel
+from .recursive import RECURSIVE_KERNELS, recursive_kernel
+from .recursive_tangent import recursive_tangent_kernel
 
 if TYPE_CHECKING:
     from ...symbolic.equations import Equations
@@ -99,8 +100,9 @@ class KernelSource:
             return self.expression_kernel(name, friction_kernel_matrices(self.equations.system))
         names = LAYOUTS.get(name, (name,))
         blocks = tuple(Block(block, _rows_and_columns(block, self.equations.shape)) for block in names)
-        if name == "dynamics":  # a robot tree's M and h by recursive algorithms (None: not a qualifying tree)
-            recursive = recursive_dynamics_kernel(self, blocks)
+        if name in RECURSIVE_KERNELS or name == "tangent":  # a tree's by recursive algorithms (None: not a tree)
+            recursive = recursive_kernel(self, name, blocks) if name != "tangent" else recursive_tangent_kernel(
+                self, blocks)
             if recursive is not None:
                 return recursive
         return cse_kernel(name, blocks, [self.matrix(block) for block in names], self.convert.constants)
