@@ -350,12 +350,13 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
         rotation, origin = world[k][:2]
         momentum = define.vector(_apply(rotation, define.vector(linear)))
         moment = define.vector(_add(_apply(rotation, define.vector(angular)), _cross(origin, momentum)))
-        j: int | None = k
-        while j is not None:
-            _, _, axis, axis_moment = world[j]
-            value = _dot(axis, moment) + _dot(axis_moment, momentum) if frames[j].revolute else _dot(axis, momentum)
-            result[k][j] = result[j][k] = define(value)
-            j = frames[j].parent
+        ancestor: int | None = k
+        while ancestor is not None:
+            _, _, axis, axis_moment = world[ancestor]
+            value = (_dot(axis, moment) + _dot(axis_moment, momentum) if frames[ancestor].revolute
+                     else _dot(axis, momentum))
+            result[k][ancestor] = result[ancestor][k] = define(value)
+            ancestor = frames[ancestor].parent
     return result
 
 
@@ -443,9 +444,9 @@ def recursive_kernel(source: KernelSource, name: str, blocks: Sequence[Block]) -
                           "M and h come from the flat derivation", TreeDeclarationWarning, stacklevel=3)
         return None
     if name in ("Phi_q", "gamma"):
-        sums, outputs = chained_sums([entry for row in constraint_blocks(source)[name] for entry in row])
-        temporaries, outputs = _eliminated(sums, outputs)
-        return Kernel(name, tuple(blocks), temporaries, outputs, dict(source.convert.constants))
+        constraint_sums, named = chained_sums([entry for row in constraint_blocks(source)[name] for entry in row])
+        temporaries, reduced = _eliminated(constraint_sums, named)
+        return Kernel(name, tuple(blocks), temporaries, reduced, dict(source.convert.constants))
     m = source.m
     zero = se.Integer(0)
     convert = _InputConverter(source)

@@ -127,19 +127,18 @@ def _misplaced_body(system: System, links: tuple[RecursionLink, ...], bodies: di
     for link in links:
         frame = bodies[link.name].pose().frame
         own += [*frame.origin, *frame.rotation]
-    centre = [x for link in links for x in link.inertial[1]]
-    entries = [convert(sp.sympify(entry)) for entry in (*local, *own, *centre)]
+    centres = [x for link in links for x in (link.inertial[1] if link.inertial is not None else (0, 0, 0))]
+    entries = [convert(sp.sympify(entry)) for entry in (*local, *own, *centres)]
     if convert.constants:  # numbers too large for an exact fraction: their values
-        values = {se.Symbol(name): se.RealDouble(value) for name, value in convert.constants.items()}
-        entries = [entry.xreplace(values) for entry in entries]
+        large = {se.Symbol(name): se.RealDouble(value) for name, value in convert.constants.items()}
+        entries = [entry.xreplace(large) for entry in entries]
     evaluate = se.Lambdify([se.Symbol(symbol.name) for symbol in symbols], entries, backend="lambda")
     rng = np.random.default_rng(19)
     for _ in range(POSE_CHECK_STATES):
         q = rng.uniform(-np.pi, np.pi, len(system.coordinates))
         parameters = rng.uniform(0.5, 1.5, len(system.parameters))
-        values = np.asarray(evaluate(np.concatenate([q, parameters])), dtype=float).ravel()
-        centre = values[-3 * len(links):]
-        values = values[:-3 * len(links)]
+        evaluated = np.asarray(evaluate(np.concatenate([q, parameters])), dtype=float).ravel()
+        centre, values = evaluated[-3 * len(links):], evaluated[:-3 * len(links)]
         frames: dict[str, tuple[np.ndarray, np.ndarray]] = {GROUND: (np.zeros(3), np.eye(3))}
         offset = 12 * len(links)
         scale = 1.0 + max(float(np.max(np.abs(values[offset:]))), float(np.max(np.abs(centre), initial=0.0)))
@@ -149,7 +148,7 @@ def _misplaced_body(system: System, links: tuple[RecursionLink, ...], bodies: di
             world_rotation = parent_rotation @ rotation
             world_origin = parent_origin + parent_rotation @ origin
             frames[link.name] = world_origin, world_rotation
-            d = system.dimension
+            d = 3 if system.dimension == 3 else 2
             body_position = values[offset:offset + d]
             body_rotation = values[offset + d:offset + d + d * d].reshape(d, d)
             offset += d + d * d
