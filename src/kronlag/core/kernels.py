@@ -38,6 +38,7 @@ __all__ = [
     "ExpressionConverter",
     "cse_kernel",
     "linear_cse",
+    "rebuilt",
     "LINEAR_CSE_OUTPUTS",
     "LINEAR_CSE_NODES",
     "literal",
@@ -220,7 +221,7 @@ class ExpressionConverter:
         args = [self.native(arg) for arg in expr.args]
         if isinstance(expr, se.FunctionSymbol):
             raise NotImplementedError(f"cannot generate code for the undefined function {expr}")
-        return _rebuilt(expr, args)
+        return rebuilt(expr, args)
 
     def native_matrix(self, matrix: se.DenseMatrix, name: str = "matrix") -> list[list[se.Basic]]:
         """The entries of the SymEngine ``matrix`` (called ``name`` in errors) converted by :meth:`native`."""
@@ -327,7 +328,7 @@ def _more_nodes_than(exprs: Sequence[se.Basic], limit: int) -> bool:
     return False
 
 
-def _rebuilt(expr: se.Basic, args: Sequence[se.Basic]) -> se.Basic:
+def rebuilt(expr: se.Basic, args: Sequence[se.Basic]) -> se.Basic:
     """``expr`` of the same kind with ``args``."""
     if isinstance(expr, se.Add):
         return se.Add(*args)
@@ -398,7 +399,7 @@ def linear_cse(exprs: Sequence[se.Basic]) -> tuple[list[tuple[se.Symbol, se.Basi
             elif not any(map(operator.is_not, args, children)):  # in C: no generator frames
                 value = node
             else:
-                value = _rebuilt(node, args)
+                value = rebuilt(node, args)
             if uses[node] > 1:
                 symbol = se.Symbol(f"x{len(temporaries)}")
                 temporaries.append((symbol, value))

@@ -293,7 +293,7 @@ def _advance(model: NumericModel, state: tuple, time: float, tol: float, *, dept
                     f"{where}: the positions cannot be followed on their assembly branch (the Newton "
                     f"correction stays large against the step after {_MAX_HALVINGS} halvings)")
     middle = _advance(model, state, start + h / 2, tol, depth=depth + 1, scales=scales)
-    _check_regular(model, *middle[:2], scales)
+    _check_regular(model, middle[0], middle[1], scales)
     return _advance(model, middle, time, tol, depth=depth + 1, scales=scales)
 
 

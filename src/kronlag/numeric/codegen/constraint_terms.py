@@ -23,6 +23,8 @@ from typing import TYPE_CHECKING
 
 import symengine as se
 
+from ...core.kernels import rebuilt
+
 if TYPE_CHECKING:
     from .source import KernelSource
 
@@ -73,14 +75,8 @@ def chained_sums(entries: Sequence[se.Basic], *, prefix: str = "sum"
                 result = names.get(key)
                 if result is None:
                     result = names[key] = se.Symbol(f"{prefix}{len(names)}")
-            elif isinstance(expr, se.Add):
-                result = se.Add(*args)
-            elif isinstance(expr, se.Mul):
-                result = se.Mul(*args)
-            elif isinstance(expr, se.Pow):
-                result = se.Pow(*args)
             else:
-                result = expr.func(*args)
+                result = rebuilt(expr, args)
             memo[expr] = result
         return result
 

@@ -43,7 +43,7 @@ import numpy as np
 import symengine as se
 import sympy as sp
 
-from ...core.kernels import Block, Kernel
+from ...core.kernels import Block, Kernel, rebuilt
 from ...model.frames import GROUND
 from ...model.symbols import free_symbols
 from ...model.system import System
@@ -56,7 +56,7 @@ if TYPE_CHECKING:
     from .source import KernelSource
 
 __all__ = ["RecursionLink", "Recursion", "recursion_of", "dynamics_algorithm", "bias_forces", "mass_matrix",
-           "recursive_kernel", "RECURSIVE_KERNELS"]
+           "recursive_kernel", "RECURSIVE_KERNELS", "dependency_order"]
 
 #: The joints the recursion moves along (one coordinate each); the readers merge fixed joints.
 RECURSIVE_JOINTS = ("revolute", "continuous", "prismatic")
@@ -388,15 +388,7 @@ class _InputConverter:
             elif not expr.args:
                 result = expr
             else:
-                args = [self.exact(arg) for arg in expr.args]
-                if isinstance(expr, se.Add):
-                    result = se.Add(*args)
-                elif isinstance(expr, se.Mul):
-                    result = se.Mul(*args)
-                elif isinstance(expr, se.Pow):
-                    result = se.Pow(*args)
-                else:
-                    result = expr.func(*args)
+                result = rebuilt(expr, [self.exact(arg) for arg in expr.args])
             self.memo[expr] = result
         return result
 
@@ -500,29 +492,9 @@ def _eliminated(definitions: list[tuple[se.Symbol, se.Basic]], outputs: list[se.
     replacements, reduced = se.cse([expr for _, expr in definitions] + outputs)
     values = {symbol: expr for symbol, expr in replacements}
     values.update({symbol: expr for (symbol, _), expr in zip(definitions, reduced)})
-    order: list[se.Symbol] = []
-    done: set[se.Symbol] = set()
-
-    def visit(root: se.Basic) -> None:
-        stack = [(root, False)]
-        while stack:
-            symbol, ready = stack.pop()
-            if symbol in done:
-                continue
-            if ready:
-                done.add(symbol)
-                order.append(symbol)
-                continue
-            stack.append((symbol, True))
-            stack.extend((used, False) for used in values[symbol].free_symbols if used in values and used not in done)
-
-    for symbol, _ in definitions:
-        visit(symbol)
     final = reduced[len(definitions):]
-    for expr in final:
-        for used in expr.free_symbols:
-            if used in values:
-                visit(used)
+    used_by_outputs = [used for expr in final for used in expr.free_symbols if used in values]
+    order = dependency_order(values, [symbol for symbol, _ in definitions] + used_by_outputs)
     # a temporary that is a symbol or a number times one is written where it is used
     kept: list[se.Symbol] = []
     names: dict[se.Symbol, se.Basic] = {}
@@ -536,6 +508,26 @@ def _eliminated(definitions: list[tuple[se.Symbol, se.Basic]], outputs: list[se.
             kept.append(symbol)
     temporaries = tuple((names[symbol], values[symbol]) for symbol in kept)
     return temporaries, tuple(_renamed(expr, names) for expr in final)
+
+
+def dependency_order(values: dict[se.Symbol, se.Basic], roots: Sequence[se.Symbol]) -> list[se.Symbol]:
+    """The symbols of ``values`` that ``roots`` use (themselves included), each after the ones its
+    value uses (depth first, without recursion: the chains of a long tree are deep)."""
+    order: list[se.Symbol] = []
+    done: set[se.Symbol] = set()
+    for root in roots:
+        stack = [(root, False)]
+        while stack:
+            symbol, ready = stack.pop()
+            if symbol in done:
+                continue
+            if ready:
+                done.add(symbol)
+                order.append(symbol)
+                continue
+            stack.append((symbol, True))
+            stack.extend((used, False) for used in values[symbol].free_symbols if used in values and used not in done)
+    return order
 
 
 def _renamed(expr: se.Basic, names: dict[se.Symbol, se.Basic]) -> se.Basic:

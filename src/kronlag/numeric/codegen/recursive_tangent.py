@@ -28,6 +28,7 @@ from .recursive import (
     _InputConverter,
     _recursion,
     bias_forces,
+    dependency_order,
     gravity_vector,
     load_potential_gradient,
 )
@@ -65,7 +66,8 @@ def recursive_tangent_kernel(source: KernelSource, blocks: Sequence[Block]) -> K
     # temporaries so that d(Phi_q^T nu)/dq is taken through them too
     jacobian = constraint_blocks(source)["Phi_q"]
     sums, named = chained_sums([jacobian[k][i] for k in range(r) for i in range(m)], prefix="jacobian_sum")
-    define.pairs.extend(_in_order(sums))
+    values = dict(sums)
+    define.pairs.extend((symbol, values[symbol]) for symbol in dependency_order(values, list(values)))
     nonholonomic = source.matrix("A")
     residual = [tree[i] + loads[i] - forces[i][0] + se.Add(*(named[k * m + i] * nu[k] for k in range(r)))
                 + se.Add(*(nonholonomic[k][i] * mu[k] for k in range(s))) for i in range(m)]
@@ -74,26 +76,6 @@ def recursive_tangent_kernel(source: KernelSource, blocks: Sequence[Block]) -> K
                for variables in (source.q, source.qd) for i in range(m) for variable in variables]
     temporaries, outputs = _eliminated(define.pairs, entries)
     return Kernel("tangent", tuple(blocks), temporaries, outputs, dict(source.convert.constants))
-
-
-def _in_order(definitions: list[tuple[se.Symbol, se.Basic]]) -> list[tuple[se.Symbol, se.Basic]]:
-    """``definitions`` so that each follows the ones it uses."""
-    values = dict(definitions)
-    ordered: list[tuple[se.Symbol, se.Basic]] = []
-    done: set[se.Symbol] = set()
-    for root, _ in definitions:
-        stack = [(root, False)]
-        while stack:
-            symbol, ready = stack.pop()
-            if symbol in done:
-                continue
-            if ready:
-                done.add(symbol)
-                ordered.append((symbol, values[symbol]))
-                continue
-            stack.append((symbol, True))
-            stack.extend((used, False) for used in values[symbol].free_symbols if used in values and used not in done)
-    return ordered
 
 
 def _chain_rule(expr: se.Basic, variable: se.Symbol, derivative: dict[se.Symbol, se.Basic]) -> se.Basic:
