@@ -324,6 +324,28 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
                     - r[i] * moved[j] - moved[i] * r[j]
                 about_origin[p][i][j] = about_origin[p][i][j] + rotated + shift
                 about_origin[p][j][i] = about_origin[p][i][j]
+    # M's entries by whichever of two ways writes fewer operations for this tree: world-frame momenta
+    # (few products an entry, after a world frame a link: long planar chains) or momenta carried up
+    # link by link (no world frames: short spatial arms, whose joint rotations are mostly zeros and ones)
+    start = len(define.pairs)
+    costs = []
+    for way in (_entries_from_world_momenta, _entries_carried_up):
+        del define.pairs[start:]
+        result = way(frames, first, about_origin, mass, define)
+        costs.append(sum(se.count_ops(expr) for _, expr in define.pairs[start:])
+                     + sum(se.count_ops(entry) for row in result for entry in row))
+    if costs[0] <= costs[1]:
+        del define.pairs[start:]
+        result = _entries_from_world_momenta(frames, first, about_origin, mass, define)
+    return result
+
+
+def _entries_from_world_momenta(frames, first, about_origin, mass, define: _Definitions) -> list[list[se.Basic]]:
+    """M[k][j] for j = k and its ancestors from the world momentum of a unit speed of joint k (linear L,
+    angular A about the world origin) projected on joint j's axis line: s . A + (o x s) . L, or s . L
+    for a slide."""
+    zero = se.Integer(0)
+    n = len(frames)
     # each link's frame in the world (rotation, origin), its joint axis s and the axis' moment o x s there
     world: list[tuple[list[list[se.Basic]], Vector, Vector, Vector]] = []
     for frame in frames:
@@ -336,8 +358,6 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
             origin = define.vector(_add(parent_origin, _apply(parent_rotation, frame.origin)))
         axis = define.vector(_apply(rotation, frame.axis))
         world.append((rotation, origin, axis, define.vector(_cross(origin, axis))))
-    # M[k][j] for j = k and its ancestors: the world momentum (linear L, angular A about the world origin)
-    # of a unit speed of joint k, projected on joint j's axis line: s . A + (o x s) . L, or s . L for a slide
     result = [[zero] * n for _ in range(n)]
     for k, frame in enumerate(frames):
         s = frame.axis
@@ -357,6 +377,32 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
                      else _dot(axis, momentum))
             result[k][ancestor] = result[ancestor][k] = define(value)
             ancestor = frames[ancestor].parent
+    return result
+
+
+def _entries_carried_up(frames, first, about_origin, mass, define: _Definitions) -> list[list[se.Basic]]:
+    """M[k][j] for j = k and its ancestors from the momentum of a unit speed of joint k, carried up to
+    each ancestor's frame in turn and projected on its axis."""
+    zero = se.Integer(0)
+    n = len(frames)
+    result = [[zero] * n for _ in range(n)]
+    for k, frame in enumerate(frames):
+        s = frame.axis
+        if frame.revolute:  # momentum of a unit turn about the axis through the origin
+            linear = define.vector(_cross(s, first[k]))
+            angular = define.vector(_apply(about_origin[k], s))
+        else:  # of a unit slide along the axis
+            linear = define.vector(_scaled(mass[k], s))
+            angular = define.vector(_cross(first[k], s))
+        j = k
+        while True:
+            joint = frames[j]
+            result[k][j] = result[j][k] = define(_dot(joint.axis, angular if joint.revolute else linear))
+            if joint.parent is None:
+                break
+            linear_up = define.vector(_apply(joint.rotation, linear))
+            angular = define.vector(_add(_apply(joint.rotation, angular), _cross(joint.origin, linear_up)))
+            linear, j = linear_up, joint.parent
     return result
 
 
