@@ -76,4 +76,3 @@ def test_html_animation_plays_in_chromium(tmp_path):
     assert np.abs(later - start).sum(axis=-1).astype(bool).sum() > 500  # ... and has moved
     assert link_pixels_near(later, pins[shown_frame(later)]) > 5
     assert 10 <= shown_frame(later) <= 40  # mid-motion: the crank pin is at a frame well after the start
-    assert shown_frame(later) - shown_frame(start) >= 10

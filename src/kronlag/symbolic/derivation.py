@@ -43,7 +43,6 @@ from ..model.symbols import t
 from ..model.system import System
 from .equations import Equations, acceleration_offset
 from .matrices import VECTORS
-from .sequences import body_axes
 
 __all__ = ["derive"]
 
@@ -183,10 +182,10 @@ def _rotation_jacobian(body: RigidBody, q: list) -> se.DenseMatrix:
     """
     if body.rotation_sequence is not None:
         jacobian = se.zeros(3, len(q))
-        for axis, angle in body_axes(body.rotation_sequence, _symengine):
-            angle_gradient = _jacobian(se.DenseMatrix(1, 1, [angle]), q)
+        for axis, angle in body.rotation_sequence.body_axes():
+            angle_gradient = _jacobian(se.DenseMatrix(1, 1, [_symengine(angle)]), q)
             if any(not entry.is_zero for entry in angle_gradient):
-                jacobian += axis * angle_gradient
+                jacobian += _se_matrix(axis) * angle_gradient
         return jacobian
     rotation = _se_matrix(body.rotation)
     rotation_t = rotation.T
