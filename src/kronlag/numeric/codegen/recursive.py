@@ -328,15 +328,16 @@ def mass_matrix(recursion: Recursion, frames: list[_Frame], define: _Definitions
     # (few products an entry, after a world frame a link: long planar chains) or momenta carried up
     # link by link (no world frames: short spatial arms, whose joint rotations are mostly zeros and ones)
     start = len(define.pairs)
-    costs = []
+    candidates = []
     for way in (_entries_from_world_momenta, _entries_carried_up):
         del define.pairs[start:]
         result = way(frames, first, about_origin, mass, define)
-        costs.append(sum(se.count_ops(expr) for _, expr in define.pairs[start:])
-                     + sum(se.count_ops(entry) for row in result for entry in row))
-    if costs[0] <= costs[1]:
-        del define.pairs[start:]
-        result = _entries_from_world_momenta(frames, first, about_origin, mass, define)
+        added = define.pairs[start:]
+        cost = (sum(se.count_ops(expr) for _, expr in added)
+                + sum(se.count_ops(entry) for row in result for entry in row))
+        candidates.append((cost, added, result))
+    _, added, result = min(candidates, key=lambda candidate: candidate[0])  # the first on a tie
+    define.pairs[start:] = added
     return result
 
 
